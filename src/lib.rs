@@ -1,0 +1,28 @@
+//! # Lantern
+//!
+//! A previewer of multiple scattering in clouds and smoke through Jerry
+//! Tessendorf's idea of *multiple scatter as internal lights*: light that
+//! has travelled `k·s*` becomes a source `J`, sampled at points placed by
+//! density, and a short single-scatter ray march over `s*` gathers them.
+//! The physics is specified in the project's `METHOD.md`; each module says
+//! which part it implements.
+//!
+//! ## Layers and the dependency rule
+//!
+//! ```text
+//! scene/    what is rendered: camera, medium, density sources, lights; RON; loaders
+//! physics/  pure math on glam: phase function, tracking, transmittance, estimators
+//! render/   backend-neutral: prepared scene, progressive film, tone mapping, export
+//! cpu/      the rayon backend
+//! cli.rs    headless rendering, export and benchmarks
+//! ```
+//!
+//! `scene` and `physics` are leaves and never import each other; `render`
+//! uses both; `cpu` uses `render`; only `cli` (and later the UI) sit on top.
+//! Renderers know nothing of any user interface.
+
+pub mod cli;
+pub mod cpu;
+pub mod physics;
+pub mod render;
+pub mod scene;

@@ -1,0 +1,391 @@
+//! The time-gated backward walk that estimates the path-length series
+//! `J_N = Σ_{k=0}^{N} G(k s*) S₁` at a point (METHOD.md §3–§4).
+//!
+//! # What the walk estimates
+//!
+//! Let a backward walk start at `z` and fly along `−n` (`n` is the
+//! direction light travels at `z`): free flights sample collisions with
+//! rate `c` (spectral tracking), each real collision multiplies the weight
+//! by the albedo `α` and picks a new direction from the phase function,
+//! and leaving the box `B` ends the walk (outside `B` is vacuum, so it never
+//! comes back and `S₁ = 0` there). The track-length estimator of the
+//! radiance is then
+//!
+//! `L(z, n) = E[ ∫₀^∞ W(ℓ) S₁(y(ℓ), n(ℓ)) dℓ ]`,
+//!
+//! where `ℓ` is the walk's geometric path length, `y(ℓ)` its position,
+//! `n(ℓ)` minus its direction, and `W(ℓ)` its weight just then (the product
+//! of albedos, times the spectral-tracking ratios). Exchanging `E` and `∫`
+//! gives `L = ∫₀^∞ dℓ G(ℓ) S₁` with
+//!
+//! `G(s) S₁ (z, n) = E[ W(s) S₁(y(s), n(s)) ]`.
+//!
+//! This is exactly the backward (adjoint) form of the time-dependent
+//! transport equation `∂_s u + n·∇u = −c u + b ∫P u`, `u(0) = S₁`: a flight
+//! of length `s` without real collision keeps the weight with probability
+//! `T`, and a collision contributes `b/c = α` times the phase-sampled
+//! continuation. So one walk sampled at the gate times `s = k s*` gives an
+//! unbiased estimate of every term `J_k = G(k s*) S₁`, and the flights are
+//! memoryless, so a flight simply continues past a gate. Note that `S₁`
+//! includes the factor `b(y)`: at a gate in empty space it is zero even
+//! though the walk carries weight there.
+//!
+//! # The optical-depth clock
+//!
+//! METHOD.md §7 also allows the clock `dτ = c dℓ`. With RGB extinction one
+//! clock must serve all channels; this module uses the **grey extinction
+//! `c_g = max(σ_t) ρ`** (the channel that scatters most, which is also what
+//! the majorant grid bounds). In a grey medium real collisions are then a
+//! Poisson process of rate 1 in `τ`, so each window of length `τ*` holds
+//! Poisson(`τ*`) collisions whatever the density. The same derivation with
+//! `dℓ = dτ / c_g` gives `L = ∫ dτ E[W(τ) (S₁/c_g)(y(τ))]`, so in τ-time the
+//! series is `J^τ_k(z, n) = E[W(kτ*) (S₁/c_g)(z_k, n_k)]`. So that a final
+//! gather integrates either clock over geometric distance,
+//! `L₀ = ∫_{window} dt T(x, y_t) Ĵ(y_t)`, [`accumulate_j`] returns
+//! `Ĵ_k = c_g(z) J^τ_k = ρ(z) · W · α σ_t (S₁/b)(z_k, n_k)`, which is
+//! `S₁(z, n)` for `k = 0` exactly as with the geometric clock, and zero in
+//! empty space (in τ-time light crosses empty space instantly). The
+//! internal-light term `L₁` uses `Ĵ` in place of `J` for the same reason.
+//!
+//! The optical depth along a straight flight is integrated by the midpoint
+//! rule on a lattice of step `cell / 8` (the smallest extent of a majorant
+//! cell), anchored at the start of each flight and of each majorant cell:
+//! exact for densities that are constant in each majorant cell, and
+//! second-order accurate otherwise. The clock is that quadrature; the
+//! collisions themselves come from spectral tracking against the true `c`,
+//! so the walk stays unbiased for `L` whatever the quadrature error.
+
+use glam::Vec3;
+
+use super::lights::Lights;
+use super::phase;
+use super::reference::single_scatter_source;
+use super::rng::Rng;
+use super::tracking::free_flight;
+use super::volume::{DensityField, Volume};
+
+/// What the walk's clock counts between gates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Clock {
+    /// Geometric path length `ℓ`: gates at `ℓ = k s*` (the note's choice).
+    Geometric,
+    /// Grey optical depth `τ = ∫ max(σ_t) ρ dℓ`: gates at `τ = k s*`, so
+    /// that each window holds on average `s*` collisions (METHOD.md §7).
+    OpticalDepth,
+}
+
+/// Parameters of the time-gated walk.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GateSettings {
+    /// Window length `s*` (a distance, or an optical depth for
+    /// [`Clock::OpticalDepth`]).
+    pub s_star: f32,
+    /// Series truncation `N`: gates `k = 0..=N`.
+    pub n_terms: u32,
+    /// What the clock counts.
+    pub clock: Clock,
+    /// Real collisions after which Russian roulette starts.
+    pub rr_start: u32,
+}
+
+impl GateSettings {
+    /// Number of gates, `N + 1`.
+    #[inline]
+    pub fn gate_count(&self) -> usize {
+        self.n_terms as usize + 1
+    }
+}
+
+/// The rate `d(clock)/dℓ` at `p`: 1 for the geometric clock, the grey
+/// extinction `max(σ_t) ρ(p)` for the optical-depth clock.
+#[inline]
+pub fn clock_rate<D: DensityField>(vol: &Volume<D>, clock: Clock, p: Vec3) -> f32 {
+    match clock {
+        Clock::Geometric => 1.0,
+        Clock::OpticalDepth => vol.optics.sigma_t.max_element() * vol.density.density(p),
+    }
+}
+
+/// Lattice steps per majorant cell for the optical-depth quadrature.
+const CLOCK_STEPS_PER_CELL: f32 = 8.0;
+
+/// Where a clock budget runs out along a ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ClockMarch {
+    /// The clock reached the budget at this ray parameter.
+    Reached(f32),
+    /// The ray reached its end first; the clock advanced by this much.
+    Exhausted(f32),
+}
+
+/// Advances `clock` along `origin + t dir` from `t0` (inside or on the
+/// medium's box) towards `t_stop ≤ t_exit`, where `t_exit` is where the ray
+/// leaves the box. Returns where the clock has advanced by `budget`, or how
+/// far it advanced by `t_stop`. For the optical-depth clock the quadrature
+/// lattice depends on `origin`, `dir`, `t0` and `t_exit` only, so calls that
+/// differ in `t_stop` or `budget` measure the same clock.
+#[allow(clippy::too_many_arguments)] // one ray, its clipped span and its budget
+pub fn march_clock<D: DensityField>(
+    vol: &Volume<D>,
+    clock: Clock,
+    origin: Vec3,
+    dir: Vec3,
+    t0: f32,
+    t_exit: f32,
+    t_stop: f32,
+    budget: f32,
+) -> ClockMarch {
+    let t_stop = t_stop.min(t_exit);
+    if clock == Clock::Geometric {
+        let span = (t_stop - t0).max(0.0);
+        return if span >= budget {
+            ClockMarch::Reached(t0 + budget.max(0.0))
+        } else {
+            ClockMarch::Exhausted(span)
+        };
+    }
+    if budget <= 0.0 {
+        return ClockMarch::Reached(t0);
+    }
+    let grid = &vol.majorants;
+    let cell = (grid.max - grid.min) / grid.res.as_vec3();
+    let h = (cell.min_element() / CLOCK_STEPS_PER_CELL).max(1e-12);
+    let sigma_g = vol.optics.sigma_t.max_element();
+    let mut acc = 0.0f32;
+    let mut result = None;
+    grid.walk(origin, dir, t0, t_exit, |a, b, m| {
+        if a >= t_stop {
+            return false;
+        }
+        if m <= 0.0 {
+            // The majorant bounds ρ: nothing to count in this cell.
+            return b < t_stop;
+        }
+        let mut i = 0u32;
+        loop {
+            let p0 = a + i as f32 * h;
+            if p0 >= b {
+                return true;
+            }
+            let p1 = (a + (i + 1) as f32 * h).min(b);
+            let c = sigma_g * vol.density.density(origin + dir * (0.5 * (p0 + p1)));
+            let end = p1.min(t_stop);
+            let d_tau = c * (end - p0).max(0.0);
+            if c > 0.0 && acc + d_tau >= budget {
+                result = Some(ClockMarch::Reached((p0 + (budget - acc) / c).min(end)));
+                return false;
+            }
+            acc += d_tau;
+            if p1 >= t_stop {
+                return false;
+            }
+            i += 1;
+        }
+    });
+    result.unwrap_or(ClockMarch::Exhausted(acc))
+}
+
+/// Runs one backward walk from `z` along `−n` (`n`: the direction light
+/// travels at `z`), calling `on_gate(k, weight, z_k, n_k)` each time the
+/// clock reaches `k · s*`, `k = 0..=N`: `z_k` is the walk's position then,
+/// `n_k` the direction light travels there, `weight` the walk's RGB weight
+/// (so that `E[weight · f(z_k, n_k)] = G(k s*) f (z, n)`). Gate 0 fires at
+/// `z` with weight 1. The walk ends after gate `N`, on leaving the medium's
+/// box, by Russian roulette, or when its weight vanishes.
+pub fn gated_walk<D: DensityField>(
+    vol: &Volume<D>,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    rng: &mut Rng,
+    mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3),
+) {
+    walk(
+        vol,
+        z,
+        n,
+        settings,
+        rng,
+        |k, w, p, dir, _| on_gate(k, w, p, dir),
+        |_| {},
+    );
+}
+
+/// Adds one walk's estimate of `Ĵ_k(z, n)`, `k = 0..out.len()−1` (at most
+/// `N`), to `out`: with the geometric clock `Ĵ_k = J_k = G(k s*) S₁`, each
+/// gate adding `weight · b(z_k) · (S₁/b)(z_k, n_k)`; with the optical-depth
+/// clock `Ĵ_k = c_g(z) J^τ_k`, each gate adding
+/// `weight · ρ(z) · α σ_t · (S₁/b)(z_k, n_k)` (see the module doc). `out[1]`
+/// is the note's internal light source `F`.
+pub fn accumulate_j<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    rng: &mut Rng,
+    out: &mut [Vec3],
+) {
+    let scatter = vol.optics.albedo * vol.optics.sigma_t;
+    let rho_z = vol.density.density(z);
+    if settings.clock == Clock::OpticalDepth && rho_z <= 0.0 {
+        return;
+    }
+    let gates = out.len().min(settings.gate_count());
+    if gates == 0 {
+        return;
+    }
+    let limited = GateSettings {
+        n_terms: (gates - 1) as u32,
+        ..*settings
+    };
+    walk(
+        vol,
+        z,
+        n,
+        &limited,
+        rng,
+        |k, w, zk, nk, rng| {
+            let rho = match settings.clock {
+                Clock::Geometric => vol.density.density(zk),
+                Clock::OpticalDepth => rho_z,
+            };
+            if rho <= 0.0 || w == Vec3::ZERO {
+                return;
+            }
+            let source = single_scatter_source(vol, lights, zk, nk, rng);
+            out[k as usize] += w * scatter * rho * source;
+        },
+        |_| {},
+    );
+}
+
+/// One walk's estimate of `Ĵ_k(z, n)` for `k = 0..=N` (see
+/// [`accumulate_j`]).
+pub fn estimate_j<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    rng: &mut Rng,
+) -> Vec<Vec3> {
+    let mut out = vec![Vec3::ZERO; settings.gate_count()];
+    accumulate_j(vol, lights, z, n, settings, rng, &mut out);
+    out
+}
+
+/// The walk itself. `on_gate` also receives the random stream, so that the
+/// caller can trace shadow rays; `on_collision(clock)` is called at every
+/// real collision with the clock's value there (a hook for tests).
+fn walk<D: DensityField>(
+    vol: &Volume<D>,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    rng: &mut Rng,
+    mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, &mut Rng),
+    mut on_collision: impl FnMut(f32),
+) {
+    let s_star = settings.s_star.max(0.0);
+    let last = settings.n_terms;
+    let mut weight = Vec3::ONE;
+    on_gate(0, weight, z, n, rng);
+    if last == 0 {
+        return;
+    }
+    let mut next = 1u32;
+    let mut origin = z;
+    let mut dir = -n;
+    // Clock value at `origin`.
+    let mut clock_at_origin = 0.0f32;
+    let mut collisions = 0u32;
+    // One flight per iteration: from `origin` to the next gate, the next
+    // real collision, or the exit of the box, whichever comes first.
+    loop {
+        let Some((t_enter, t_exit)) = vol.clip(origin, dir) else {
+            return;
+        };
+        let clock_at_enter = match settings.clock {
+            Clock::Geometric => clock_at_origin + t_enter,
+            Clock::OpticalDepth => clock_at_origin,
+        };
+        // Gates in the vacuum before the box (only when `z` is outside it,
+        // and only for the geometric clock).
+        while settings.clock == Clock::Geometric && next as f32 * s_star <= clock_at_enter {
+            let t = next as f32 * s_star - clock_at_origin;
+            on_gate(next, weight, origin + dir * t, -dir, rng);
+            if next == last {
+                return;
+            }
+            next += 1;
+        }
+        let gate_clock = next as f32 * s_star;
+        let budget = gate_clock - clock_at_enter;
+        let march = march_clock(
+            vol,
+            settings.clock,
+            origin,
+            dir,
+            t_enter,
+            t_exit,
+            t_exit,
+            budget,
+        );
+        let gate_t = match march {
+            ClockMarch::Reached(t) => Some(t),
+            ClockMarch::Exhausted(_) => None,
+        };
+        let flight_end = gate_t.unwrap_or(t_exit);
+        match free_flight(vol, origin, dir, t_enter, flight_end, &mut weight, rng) {
+            Some(t_hit) => {
+                let advanced = match march_clock(
+                    vol,
+                    settings.clock,
+                    origin,
+                    dir,
+                    t_enter,
+                    t_exit,
+                    t_hit,
+                    f32::INFINITY,
+                ) {
+                    ClockMarch::Reached(_) => 0.0,
+                    ClockMarch::Exhausted(d) => d,
+                };
+                // Rounding must not put the collision past the gate.
+                clock_at_origin = (clock_at_enter + advanced).min(gate_clock);
+                origin += dir * t_hit;
+                on_collision(clock_at_origin);
+                weight *= vol.optics.albedo;
+                collisions += 1;
+                if collisions >= settings.rr_start {
+                    let q = weight.max_element().min(0.95);
+                    if q <= 0.0 || rng.next_f32() >= q {
+                        return;
+                    }
+                    weight /= q;
+                }
+                dir = phase::sample_hg(vol.optics.g, dir, rng.next_f32(), rng.next_f32());
+            }
+            None => {
+                if weight == Vec3::ZERO {
+                    return;
+                }
+                // No gate before the exit: the walk left the box, and
+                // nothing comes back from the vacuum outside it.
+                let Some(t) = gate_t else {
+                    return;
+                };
+                origin += dir * t;
+                on_gate(next, weight, origin, -dir, rng);
+                if next == last {
+                    return;
+                }
+                next += 1;
+                // The flight goes on from the gate: flights are memoryless,
+                // and the quadrature lattice is re-anchored here.
+                clock_at_origin = gate_clock;
+            }
+        }
+    }
+}

@@ -1,0 +1,20 @@
+//! Pure mathematics of light transport on `glam` types: random numbers,
+//! the Henyey–Greenstein phase function, majorant grids, delta/spectral and
+//! ratio tracking, and the estimators built from them (METHOD.md §1–§2).
+//!
+//! This layer is a leaf: it knows nothing of scene files, of threads or of
+//! the user interface. A medium is anything that implements
+//! [`volume::DensityField`]; the renderers in `cpu/` (and the WGSL mirrors in
+//! `shaders/`) call these functions per sample.
+
+pub mod frame;
+pub mod gated_walk;
+pub mod lights;
+pub mod majorant;
+pub mod phase;
+pub mod placement;
+pub mod reference;
+pub mod rng;
+pub mod sh;
+pub mod tracking;
+pub mod volume;

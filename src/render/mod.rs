@@ -1,0 +1,14 @@
+//! Backend-neutral rendering: the prepared scene (camera frame, volume,
+//! lights) that every estimator reads, the progressive film that passes
+//! accumulate into, display transforms, and image export.
+//!
+//! Sits above `scene` and `physics`; the `cpu` (and later `gpu`) backends
+//! sit above it. Nothing here knows about threads or the user interface.
+
+pub mod export;
+pub mod film;
+pub mod prepared;
+pub mod tonemap;
+
+pub use film::Film;
+pub use prepared::{Prepared, SceneVolume};

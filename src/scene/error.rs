@@ -1,0 +1,75 @@
+//! Errors raised while reading scenes and volume files.
+//!
+//! Every variant names the file (or the field) at fault, so that a message
+//! shown to an artist says where to look and what is wrong.
+
+use std::path::PathBuf;
+
+/// Anything that can go wrong while loading or validating a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file could not be read at all (missing, unreadable).
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file that could not be read.
+        path: PathBuf,
+        /// The operating system's reason.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The scene file is not valid RON for a Lantern scene (syntax, unknown
+    /// or missing field, wrong type).
+    #[error("{path}: {message}")]
+    Parse {
+        /// The scene file.
+        path: PathBuf,
+        /// The parser's message with line and column.
+        message: String,
+    },
+    /// A value in the scene is out of its allowed range.
+    #[error("{path}: invalid {field}: {reason}")]
+    Invalid {
+        /// The scene file (or `<memory>` for scenes built in code).
+        path: PathBuf,
+        /// The field at fault, as it is written in the scene file.
+        field: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A volume file is malformed: bad magic, truncated data, inconsistent
+    /// header, unsupported encoding, or a failure inside the reader.
+    #[error("volume file {path}: {reason}")]
+    Volume {
+        /// The volume (or header) file.
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The scene could not be written.
+    #[error("cannot write {path}: {reason}")]
+    Write {
+        /// The destination.
+        path: PathBuf,
+        /// Why it failed.
+        reason: String,
+    },
+}
+
+impl SceneError {
+    /// Shorthand for [`SceneError::Invalid`].
+    pub fn invalid(path: impl Into<PathBuf>, field: &str, reason: impl Into<String>) -> Self {
+        Self::Invalid {
+            path: path.into(),
+            field: field.to_owned(),
+            reason: reason.into(),
+        }
+    }
+
+    /// Shorthand for [`SceneError::Volume`].
+    pub fn volume(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
+        Self::Volume {
+            path: path.into(),
+            reason: reason.into(),
+        }
+    }
+}

@@ -1,0 +1,354 @@
+//! What is rendered: camera, medium, density sources, lights and render
+//! settings, read from and written to RON, plus the loaders that turn a
+//! density source into something that can be evaluated (METHOD.md §1).
+//!
+//! This layer is a leaf: it knows nothing of the estimators. Every value that
+//! comes from a file is validated here, so that the renderers can assume
+//! finite, in-range inputs.
+
+pub mod camera;
+pub mod cloud;
+pub mod error;
+pub mod grid;
+pub mod light;
+pub mod medium;
+pub mod settings;
+pub mod volume;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+pub use camera::{Camera, CameraFrame};
+pub use error::SceneError;
+pub use grid::VoxelGrid;
+pub use light::Light;
+pub use medium::{CloudParams, DensitySource, GridFormat, GridSource, Medium};
+pub use settings::{Method, RenderSettings};
+
+/// Largest image side accepted, in pixels.
+pub const MAX_IMAGE_SIDE: u32 = 16384;
+
+/// A whole scene, as stored in a `.ron` file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// The camera.
+    pub camera: Camera,
+    /// The participating medium.
+    pub medium: Medium,
+    /// External lights.
+    pub lights: Vec<Light>,
+    /// Render settings.
+    #[serde(default)]
+    pub render: RenderSettings,
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        Self {
+            camera: Camera::default(),
+            medium: Medium::default(),
+            lights: vec![Light::Sun {
+                direction: Vec3::new(-0.4, -1.0, -0.3),
+                irradiance: Vec3::splat(3.0),
+            }],
+            render: RenderSettings::default(),
+        }
+    }
+}
+
+/// The density field ready to evaluate: analytic shapes, or a grid loaded
+/// from a file or baked from the procedural cloud.
+#[derive(Clone, Debug)]
+pub enum Density {
+    /// `ρ = 1` inside the sphere.
+    Sphere {
+        /// Centre.
+        center: Vec3,
+        /// Radius.
+        radius: f32,
+    },
+    /// `ρ = 1` inside the box.
+    Box {
+        /// Minimum corner.
+        min: Vec3,
+        /// Maximum corner.
+        max: Vec3,
+    },
+    /// Trilinearly interpolated voxels.
+    Grid(Arc<VoxelGrid>),
+}
+
+impl Density {
+    /// The world-space box outside which `ρ = 0`.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        match self {
+            Density::Sphere { center, radius } => (
+                *center - Vec3::splat(*radius),
+                *center + Vec3::splat(*radius),
+            ),
+            Density::Box { min, max } => (*min, *max),
+            Density::Grid(g) => (g.bounds_min, g.bounds_max),
+        }
+    }
+
+    /// `ρ` at world point `p`.
+    #[inline]
+    pub fn density(&self, p: Vec3) -> f32 {
+        match self {
+            Density::Sphere { center, radius } => {
+                if (p - *center).length_squared() <= radius * radius {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            Density::Box { min, max } => {
+                if p.cmpge(*min).all() && p.cmple(*max).all() {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            Density::Grid(g) => {
+                let (lo, hi) = (g.bounds_min, g.bounds_max);
+                if p.cmpge(lo).all() && p.cmple(hi).all() {
+                    g.sample(p)
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// An upper bound of `ρ` over the world box `[lo, hi]`.
+    pub fn max_in_box(&self, lo: Vec3, hi: Vec3) -> f32 {
+        match self {
+            Density::Sphere { center, radius } => {
+                let nearest = center.clamp(lo, hi);
+                if (nearest - *center).length_squared() <= radius * radius {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            Density::Box { min, max } => {
+                if lo.cmple(*max).all() && hi.cmpge(*min).all() {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+            Density::Grid(g) => g.max_in_box(lo, hi),
+        }
+    }
+}
+
+impl Scene {
+    /// Reads and validates a scene file. Grids are not loaded yet: see
+    /// [`Scene::load_density`].
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+        Self::from_ron(&text, path)
+    }
+
+    /// Parses and validates RON text; `path` is only used in messages.
+    pub fn from_ron(text: &str, path: &Path) -> Result<Scene, SceneError> {
+        let scene: Scene = ron::from_str(text).map_err(|e| SceneError::Parse {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+        scene.validate(path)?;
+        Ok(scene)
+    }
+
+    /// The scene as pretty RON text.
+    pub fn to_ron(&self) -> Result<String, SceneError> {
+        let pretty = ron::ser::PrettyConfig::new().struct_names(false);
+        ron::ser::to_string_pretty(self, pretty).map_err(|e| SceneError::Write {
+            path: PathBuf::from("<memory>"),
+            reason: e.to_string(),
+        })
+    }
+
+    /// Writes the scene as RON.
+    pub fn save(&self, path: &Path) -> Result<(), SceneError> {
+        let text = self.to_ron()?;
+        std::fs::write(path, text).map_err(|e| SceneError::Write {
+            path: path.to_owned(),
+            reason: e.to_string(),
+        })
+    }
+
+    /// Checks every value against its allowed range; `path` names the
+    /// scene in the error.
+    pub fn validate(&self, path: &Path) -> Result<(), SceneError> {
+        let bad = |field: &str, reason: String| Err(SceneError::invalid(path, field, reason));
+        let finite3 = |v: Vec3| v.is_finite();
+
+        let c = &self.camera;
+        if c.width == 0 || c.height == 0 {
+            return bad(
+                "camera.width/height",
+                format!("image size {}×{} is empty", c.width, c.height),
+            );
+        }
+        if c.width > MAX_IMAGE_SIDE || c.height > MAX_IMAGE_SIDE {
+            return bad(
+                "camera.width/height",
+                format!(
+                    "image size {}×{} exceeds {MAX_IMAGE_SIDE} pixels per side",
+                    c.width, c.height
+                ),
+            );
+        }
+        if !(finite3(c.eye) && finite3(c.target) && finite3(c.up)) {
+            return bad("camera", "eye, target and up must be finite".into());
+        }
+        let forward = c.target - c.eye;
+        if forward.length_squared() < 1e-12 {
+            return bad("camera.target", "target coincides with eye".into());
+        }
+        if forward.normalize().cross(c.up.normalize_or_zero()).length() < 1e-4 {
+            return bad(
+                "camera.up",
+                "up is zero or parallel to the view direction".into(),
+            );
+        }
+        if !(c.fov_y_deg.is_finite() && c.fov_y_deg > 0.0 && c.fov_y_deg < 179.0) {
+            return bad(
+                "camera.fov_y_deg",
+                format!("{} is outside (0, 179) degrees", c.fov_y_deg),
+            );
+        }
+
+        let m = &self.medium;
+        if !(finite3(m.sigma_t) && m.sigma_t.min_element() >= 0.0) {
+            return bad(
+                "medium.sigma_t",
+                format!("{:?} must be finite and non-negative", m.sigma_t.to_array()),
+            );
+        }
+        if m.sigma_t.max_element() > 1e6 {
+            return bad(
+                "medium.sigma_t",
+                format!("{:?} exceeds 1e6 per unit length", m.sigma_t.to_array()),
+            );
+        }
+        if !(finite3(m.albedo) && m.albedo.min_element() >= 0.0 && m.albedo.max_element() <= 1.0) {
+            return bad(
+                "medium.albedo",
+                format!("{:?} must lie in [0, 1]", m.albedo.to_array()),
+            );
+        }
+        if !(m.g.is_finite() && m.g.abs() < 1.0) {
+            return bad("medium.g", format!("{} must lie in (-1, 1)", m.g));
+        }
+        if !(m.density_scale.is_finite() && m.density_scale >= 0.0) {
+            return bad(
+                "medium.density_scale",
+                format!("{} must be finite and non-negative", m.density_scale),
+            );
+        }
+        match &m.density {
+            DensitySource::Sphere { center, radius } => {
+                if !(finite3(*center) && radius.is_finite() && *radius > 0.0) {
+                    return bad(
+                        "medium.density.Sphere",
+                        "centre must be finite and radius positive".into(),
+                    );
+                }
+            }
+            DensitySource::Box { min, max } => {
+                if !(finite3(*min) && finite3(*max) && max.cmpgt(*min).all()) {
+                    return bad(
+                        "medium.density.Box",
+                        "min and max must be finite with max > min on every axis".into(),
+                    );
+                }
+            }
+            DensitySource::Cloud(p) => cloud::validate(p, path)?,
+            DensitySource::Grid(g) => {
+                if let Some((lo, hi)) = g.bounds {
+                    if !(finite3(lo) && finite3(hi) && hi.cmpgt(lo).all()) {
+                        return bad(
+                            "medium.density.Grid.bounds",
+                            "bounds must be finite with max > min on every axis".into(),
+                        );
+                    }
+                }
+            }
+        }
+
+        for (i, light) in self.lights.iter().enumerate() {
+            match light {
+                Light::Sun {
+                    direction,
+                    irradiance,
+                } => {
+                    if !(finite3(*direction) && direction.length_squared() > 1e-12) {
+                        return bad(
+                            &format!("lights[{i}].direction"),
+                            "must be finite and non-zero".into(),
+                        );
+                    }
+                    if !(finite3(*irradiance) && irradiance.min_element() >= 0.0) {
+                        return bad(
+                            &format!("lights[{i}].irradiance"),
+                            "must be finite and non-negative".into(),
+                        );
+                    }
+                }
+                Light::Point {
+                    position,
+                    intensity,
+                } => {
+                    if !finite3(*position) {
+                        return bad(&format!("lights[{i}].position"), "must be finite".into());
+                    }
+                    if !(finite3(*intensity) && intensity.min_element() >= 0.0) {
+                        return bad(
+                            &format!("lights[{i}].intensity"),
+                            "must be finite and non-negative".into(),
+                        );
+                    }
+                }
+            }
+        }
+        if self.render.spp == 0 {
+            return bad("render.spp", "must be at least 1".into());
+        }
+        Ok(())
+    }
+
+    /// Loads or bakes the density field. Relative grid paths are resolved
+    /// against `scene_dir` (the folder of the scene file).
+    pub fn load_density(&self, scene_dir: &Path) -> Result<Density, SceneError> {
+        match &self.medium.density {
+            DensitySource::Sphere { center, radius } => Ok(Density::Sphere {
+                center: *center,
+                radius: *radius,
+            }),
+            DensitySource::Box { min, max } => Ok(Density::Box {
+                min: *min,
+                max: *max,
+            }),
+            DensitySource::Cloud(p) => Ok(Density::Grid(Arc::new(cloud::bake(p)))),
+            DensitySource::Grid(src) => {
+                let path = scene_dir.join(&src.path);
+                let mut grid = volume::load_grid(&path, src.format, src.grid_name.as_deref())?;
+                if let Some((lo, hi)) = src.bounds {
+                    grid.bounds_min = lo;
+                    grid.bounds_max = hi;
+                }
+                Ok(Density::Grid(Arc::new(grid)))
+            }
+        }
+    }
+}
