@@ -1,0 +1,101 @@
+//! Helpers shared by the integration tests: loading scenes, rendering, and
+//! comparing Monte Carlo images statistically (image means and a per-pixel
+//! z-test in the manner of Mitsuba 3's regression tests).
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use lantern::render::export::write_exr;
+use lantern::render::film::image_mean;
+use lantern::render::{Film, Prepared};
+use lantern::scene::{Method, Scene};
+
+/// The repository root.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Loads and prepares a scene given relative to the repository root.
+pub fn prepare(rel: &str) -> Prepared {
+    let path = root().join(rel);
+    let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    Prepared::new(scene, path.parent().unwrap()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Renders `spp` passes with `method` and `seed`.
+pub fn render(prepared: &Prepared, method: Method, seed: u64, spp: u32) -> Film {
+    lantern::cpu::render(prepared, method, seed, spp, |_| true)
+}
+
+/// The outcome of comparing two noisy images.
+#[derive(Debug)]
+pub struct Comparison {
+    /// Image mean of the first image, per channel.
+    pub mean_a: Vec3,
+    /// Image mean of the second image, per channel.
+    pub mean_b: Vec3,
+    /// Relative difference of the means, per channel.
+    pub rel_mean_diff: Vec3,
+    /// Fraction of pixel channels whose |z| is below the threshold.
+    pub z_pass_fraction: f64,
+    /// RMSE of a against b, relative to b's mean (over channels).
+    pub rel_rmse: f64,
+}
+
+/// Compares image `a` (variance of its mean per pixel `var_a`) with `b`
+/// (`var_b`): per-pixel z = (a − b)/√(var_a + var_b), passing where |z| <
+/// `z_max` (pixels where both variances vanish pass if they agree closely).
+pub fn compare(a: &[Vec3], var_a: &[Vec3], b: &[Vec3], var_b: &[Vec3], z_max: f32) -> Comparison {
+    assert_eq!(a.len(), b.len());
+    let mean_a = image_mean(a);
+    let mean_b = image_mean(b);
+    let rel_mean_diff = (mean_a - mean_b).abs() / mean_b.max(Vec3::splat(1e-12));
+    let mut pass = 0usize;
+    let mut total = 0usize;
+    let mut se = 0.0f64;
+    for i in 0..a.len() {
+        for c in 0..3 {
+            let d = a[i][c] - b[i][c];
+            se += (d as f64).powi(2);
+            let s = (var_a[i][c] + var_b[i][c]).sqrt();
+            let ok = if s > 0.0 {
+                (d / s).abs() < z_max
+            } else {
+                d.abs() <= 1e-6 * (1.0 + b[i][c].abs())
+            };
+            pass += ok as usize;
+            total += 1;
+        }
+    }
+    let rmse = (se / total as f64).sqrt();
+    let mb = (mean_b.x + mean_b.y + mean_b.z) as f64 / 3.0;
+    Comparison {
+        mean_a,
+        mean_b,
+        rel_mean_diff,
+        z_pass_fraction: pass as f64 / total as f64,
+        rel_rmse: rmse / mb.max(1e-12),
+    }
+}
+
+/// Where failing tests leave images to look at.
+pub fn output_dir() -> PathBuf {
+    let dir = root().join("target").join("test-output");
+    let _ = std::fs::create_dir_all(&dir);
+    dir
+}
+
+/// Writes an image for inspection after a failure (errors ignored: this is
+/// a diagnostic aid).
+pub fn dump(name: &str, width: u32, height: u32, pixels: &[Vec3]) -> PathBuf {
+    let path = output_dir().join(format!("{name}.exr"));
+    let _ = write_exr(&path, width, height, pixels);
+    path
+}
+
+/// Whether a path exists relative to the repository root.
+pub fn exists(rel: &str) -> bool {
+    Path::new(&root().join(rel)).exists()
+}
