@@ -363,65 +363,6 @@ mod tests {
         }
     }
 
-    /// A trilinear voxel grid (samples at voxel centres), like a loaded
-    /// cloud.
-    struct Voxels {
-        n: usize,
-        data: Vec<f32>,
-    }
-
-    impl Voxels {
-        fn new(n: usize) -> Self {
-            let mut data = vec![0.0; n * n * n];
-            for k in 0..n {
-                for j in 0..n {
-                    for i in 0..n {
-                        let p = (Vec3::new(i as f32, j as f32, k as f32) + 0.5) / n as f32;
-                        let a = (p - Vec3::new(0.4, 0.5, 0.5)).length();
-                        let b = (p - Vec3::new(0.65, 0.45, 0.55)).length();
-                        data[i + n * (j + n * k)] =
-                            (1.0 - a / 0.3).max(0.0) + 0.5 * (1.0 - b / 0.2).max(0.0);
-                    }
-                }
-            }
-            Self { n, data }
-        }
-    }
-
-    impl DensityField for Voxels {
-        fn density(&self, p: Vec3) -> f32 {
-            let n = self.n as f32;
-            let g = p * n - 0.5;
-            if p.cmplt(Vec3::ZERO).any() || p.cmpgt(Vec3::ONE).any() {
-                return 0.0;
-            }
-            let c = g.floor().clamp(Vec3::ZERO, Vec3::splat(n - 2.0));
-            let f = (g - c).clamp(Vec3::ZERO, Vec3::ONE);
-            let (i, j, k) = (c.x as usize, c.y as usize, c.z as usize);
-            let at = |di, dj, dk| self.data[(i + di) + self.n * ((j + dj) + self.n * (k + dk))];
-            let l = |a: f32, b: f32, t: f32| a + (b - a) * t;
-            l(
-                l(
-                    l(at(0, 0, 0), at(1, 0, 0), f.x),
-                    l(at(0, 1, 0), at(1, 1, 0), f.x),
-                    f.y,
-                ),
-                l(
-                    l(at(0, 0, 1), at(1, 0, 1), f.x),
-                    l(at(0, 1, 1), at(1, 1, 1), f.x),
-                    f.y,
-                ),
-                f.z,
-            )
-        }
-        fn bounds(&self) -> (Vec3, Vec3) {
-            (Vec3::ZERO, Vec3::ONE)
-        }
-        fn max_in_box(&self, _: Vec3, _: Vec3) -> f32 {
-            1.5
-        }
-    }
-
     /// `∫_B f` by the midpoint rule on `n` cells along the longest axis, in
     /// f64.
     fn integrate(bounds: (Vec3, Vec3), n: usize, f: impl Fn(Vec3) -> f64) -> f64 {
