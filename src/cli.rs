@@ -2,7 +2,7 @@
 //!
 //! `lantern render SCENE.ron --out FILE.exr|FILE.png` renders a still;
 //! `lantern bench` measures samples per second on the example scenes;
-//! `lantern` alone will open the previewer.
+//! `lantern` alone, or `lantern view [SCENE]`, opens the previewer.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -43,6 +43,12 @@ impl From<MethodArg> for Method {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Open the interactive previewer (the default without a subcommand).
+    View {
+        /// A scene (.ron) or volume (.vdb, .vol) to open instead of the
+        /// last session's scene.
+        scene: Option<PathBuf>,
+    },
     /// Render a scene to an image file.
     Render {
         /// The scene file (.ron).
@@ -91,14 +97,8 @@ pub enum Command {
 /// Runs the command line; the binary's `main` calls this.
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        None => {
-            eprintln!(
-                "The interactive previewer is not part of this build yet.\n\
-                 Render headless instead:  lantern render assets/scenes/cloud.ron --out cloud.exr\n\
-                 See `lantern --help`."
-            );
-            Ok(())
-        }
+        None => open_previewer(None),
+        Some(Command::View { scene }) => open_previewer(scene),
         Some(Command::Render {
             scene,
             method,
@@ -131,6 +131,15 @@ pub fn run(cli: Cli) -> Result<()> {
             bench_command(scenes, spp, repeats, size)
         }
     }
+}
+
+/// Opens the previewer; scripted runs (screenshot, latency measurement)
+/// are configured through `LANTERN_*` environment variables.
+fn open_previewer(scene: Option<PathBuf>) -> Result<()> {
+    crate::ui::run(crate::ui::LaunchOptions {
+        scene,
+        script: crate::ui::app::Script::from_env(),
+    })
 }
 
 fn set_threads(threads: Option<usize>) -> Result<()> {

@@ -1,0 +1,813 @@
+//! The previewer's state and frame loop: the edited document with undo and
+//! redo, the persisted session, notifications, the worker that renders, and
+//! the scripted runs used by tests and the README screenshot.
+//!
+//! Every frame the document (plus the viewport size and view mode) is
+//! turned into a [`Job`]; when it differs from the job in flight, the
+//! worker is told, which cancels the pass in flight and restarts the image.
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::Receiver;
+use std::time::{Duration, Instant};
+
+use eframe::egui;
+use serde::{Deserialize, Serialize};
+
+use super::backend::{Estimator, InternalSettings, Job, Worker, HAS_INTERNAL};
+use super::files::{self, Loaded};
+use super::viewport::{Display, NavState};
+use super::LaunchOptions;
+use crate::render::tonemap::ViewTransform;
+use crate::scene::Scene;
+
+/// What is edited, saved and undone: the scene and the method's settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Document {
+    /// The scene.
+    pub scene: Scene,
+    /// The internal-lights settings.
+    pub internal: InternalSettings,
+}
+
+/// What the viewport shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum CompareMode {
+    /// The internal-lights image.
+    #[default]
+    Internal,
+    /// The reference image.
+    Reference,
+    /// Internal lights left of a draggable divider, reference right.
+    Split,
+    /// Per-pixel error of internal lights against the reference.
+    Error,
+}
+
+impl CompareMode {
+    /// The estimators the worker must run for this mode.
+    pub fn estimators(self) -> Vec<Estimator> {
+        match self {
+            CompareMode::Internal => vec![Estimator::Internal],
+            CompareMode::Reference => vec![Estimator::Reference],
+            CompareMode::Split | CompareMode::Error => {
+                vec![Estimator::Internal, Estimator::Reference]
+            }
+        }
+    }
+}
+
+/// Mouse bindings of the viewport camera.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum NavPreset {
+    /// Middle drag orbits, Shift+middle pans, Ctrl+middle or the wheel zooms.
+    #[default]
+    Blender,
+    /// Alt+left orbits, Alt+middle pans, Alt+right zooms (Maya, Houdini).
+    AltDrag,
+}
+
+/// Which quantity sizes and colours the internal-light gizmos.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LightQuantity {
+    /// `F = G(s*) S₁`, the first gated term.
+    F,
+    /// `J`, the whole series.
+    #[default]
+    J,
+}
+
+/// Settings of the previewer that survive a restart (eframe's storage).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Session {
+    /// The scene open when the previewer was closed.
+    pub last_scene: Option<PathBuf>,
+    /// Recently opened or saved scenes, newest first.
+    pub recent: Vec<PathBuf>,
+    /// Display exposure in stops.
+    pub exposure: f32,
+    /// Display view transform.
+    pub view: ViewTransform,
+    /// Camera mouse bindings.
+    pub nav: NavPreset,
+    /// Render resolution relative to the viewport's pixels.
+    pub res_scale: f32,
+    /// What the viewport shows.
+    pub compare: CompareMode,
+    /// Position of the split-view divider, 0 (left) to 1 (right).
+    pub split: f32,
+    /// Stop accumulating at this many samples per pixel.
+    pub max_spp: u32,
+    /// Draw the internal lights.
+    pub show_lights: bool,
+    /// Gizmo strength: F or J.
+    pub quantity: LightQuantity,
+    /// Gizmo strength on a log scale.
+    pub log_strength: bool,
+    /// Only the lights that contribute to the pixel under the cursor.
+    pub contributors_only: bool,
+    /// Draw the medium's box.
+    pub show_box: bool,
+    /// Draw the sun gizmo.
+    pub show_sun: bool,
+}
+
+impl Default for Session {
+    fn default() -> Self {
+        Self {
+            last_scene: None,
+            recent: Vec::new(),
+            exposure: 0.0,
+            view: ViewTransform::Filmic,
+            nav: NavPreset::Blender,
+            res_scale: 0.5,
+            compare: CompareMode::Internal,
+            split: 0.5,
+            max_spp: 1024,
+            show_lights: true,
+            quantity: LightQuantity::J,
+            log_strength: true,
+            contributors_only: false,
+            show_box: true,
+            show_sun: true,
+        }
+    }
+}
+
+/// A scripted run: tests, the README screenshot and the latency measurement
+/// drive the real window through these (from environment variables).
+#[derive(Clone, Debug, Default)]
+pub struct Script {
+    /// Save a screenshot here once `min_spp` is reached, then quit.
+    pub screenshot: Option<PathBuf>,
+    /// Samples per pixel to wait for.
+    pub min_spp: u32,
+    /// Measure slider-to-image latency over this many changes, then quit.
+    pub latency_changes: u32,
+    /// Give up (exit with an error message) after this long.
+    pub timeout: Duration,
+    /// Render at exactly this size instead of the viewport's.
+    pub render_size: Option<[u32; 2]>,
+}
+
+impl Script {
+    /// Reads `LANTERN_SCREENSHOT`, `LANTERN_SCRIPT_SPP`,
+    /// `LANTERN_LATENCY_CHANGES` and `LANTERN_SCRIPT_TIMEOUT_SECS`; `None`
+    /// when neither a screenshot nor a measurement is asked for.
+    pub fn from_env() -> Option<Script> {
+        let var = |k: &str| std::env::var(k).ok().filter(|v| !v.is_empty());
+        let screenshot = var("LANTERN_SCREENSHOT").map(PathBuf::from);
+        let latency_changes = var("LANTERN_LATENCY_CHANGES")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0);
+        if screenshot.is_none() && latency_changes == 0 {
+            return None;
+        }
+        Some(Script {
+            screenshot,
+            min_spp: var("LANTERN_SCRIPT_SPP")
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(4),
+            latency_changes,
+            timeout: Duration::from_secs(
+                var("LANTERN_SCRIPT_TIMEOUT_SECS")
+                    .and_then(|v| v.parse().ok())
+                    .unwrap_or(300),
+            ),
+            render_size: var("LANTERN_RENDER_SIZE").and_then(|v| {
+                let (w, h) = v.split_once('x')?;
+                Some([w.parse().ok()?, h.parse().ok()?])
+            }),
+        })
+    }
+}
+
+/// A message shown for a few seconds in the corner of the viewport.
+#[derive(Clone, Debug)]
+pub struct Toast {
+    /// The text.
+    pub text: String,
+    /// An error (red) rather than information.
+    pub error: bool,
+    /// When it appeared.
+    pub born: Instant,
+}
+
+/// Undo and redo of edits: snapshots of the document, recorded when an
+/// edit ends (no mouse button held), so a slider drag is one step.
+#[derive(Debug)]
+pub struct History {
+    undo: Vec<Document>,
+    redo: Vec<Document>,
+    committed: Document,
+}
+
+impl History {
+    /// Largest number of undo steps kept.
+    pub const LIMIT: usize = 200;
+
+    /// A history whose current state is `doc`.
+    pub fn new(doc: &Document) -> Self {
+        Self {
+            undo: Vec::new(),
+            redo: Vec::new(),
+            committed: doc.clone(),
+        }
+    }
+
+    /// Records `doc` as a new step if it differs from the last one.
+    pub fn commit(&mut self, doc: &Document) {
+        if *doc != self.committed {
+            let previous = std::mem::replace(&mut self.committed, doc.clone());
+            self.undo.push(previous);
+            if self.undo.len() > Self::LIMIT {
+                self.undo.remove(0);
+            }
+            self.redo.clear();
+        }
+    }
+
+    /// The state before the last step, if any.
+    pub fn undo(&mut self, doc: &mut Document) -> bool {
+        self.commit(doc);
+        match self.undo.pop() {
+            Some(previous) => {
+                self.redo
+                    .push(std::mem::replace(&mut self.committed, previous.clone()));
+                *doc = previous;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The state undone last, if any.
+    pub fn redo(&mut self, doc: &mut Document) -> bool {
+        match self.redo.pop() {
+            Some(next) => {
+                self.undo
+                    .push(std::mem::replace(&mut self.committed, next.clone()));
+                *doc = next;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Whether there is something to undo.
+    pub fn can_undo(&self) -> bool {
+        !self.undo.is_empty()
+    }
+
+    /// Whether there is something to redo.
+    pub fn can_redo(&self) -> bool {
+        !self.redo.is_empty()
+    }
+}
+
+/// Progress of a scripted run.
+#[derive(Debug, Default)]
+struct ScriptState {
+    started: Option<Instant>,
+    screenshot_requested: bool,
+    changes_done: u32,
+    last_change: Option<Instant>,
+    screenshot: Option<Receiver<std::sync::Arc<egui::ColorImage>>>,
+}
+
+/// The previewer application.
+pub struct LanternApp {
+    /// Persisted settings.
+    pub session: Session,
+    /// The edited document.
+    pub doc: Document,
+    /// Where the document was read from or last saved to.
+    pub path: Option<PathBuf>,
+    /// The folder that grid paths are relative to.
+    pub scene_dir: PathBuf,
+    /// The document as last saved (unsaved changes = differs).
+    pub saved: Document,
+    /// Undo and redo.
+    pub history: History,
+    /// The render thread.
+    pub worker: Worker,
+    /// The job in flight, and its generation.
+    pub submitted: Option<(Job, u64)>,
+    /// The displayed image and its texture.
+    pub display: Display,
+    /// Camera-navigation state of the viewport.
+    pub nav: NavState,
+    /// Notifications.
+    pub toasts: Vec<Toast>,
+    /// A scene being loaded in the background.
+    pending_load: Option<Receiver<Result<Loaded, String>>>,
+    /// The viewport's render size in pixels (after the resolution scale).
+    pub render_size: [u32; 2],
+    /// When the job of each pending generation was submitted (latency).
+    change_at: Option<(u64, Instant)>,
+    /// Slider-to-image latencies measured, in milliseconds.
+    pub latency_ms: Vec<f64>,
+    /// Whether the close dialog is open.
+    confirm_close: bool,
+    /// Whether closing was confirmed.
+    close_confirmed: bool,
+    script: Option<Script>,
+    script_state: ScriptState,
+}
+
+impl LanternApp {
+    /// The application inside eframe: restores the session and opens the
+    /// scene given on the command line, or the last one.
+    pub fn new(cc: &eframe::CreationContext<'_>, options: LaunchOptions) -> Self {
+        let session: Session = if options.script.is_some() {
+            Session::default()
+        } else {
+            cc.storage
+                .and_then(|s| eframe::get_value(s, eframe::APP_KEY))
+                .unwrap_or_default()
+        };
+        let ctx = cc.egui_ctx.clone();
+        let worker = Worker::start(Box::new(move || ctx.request_repaint()));
+        let mut app = Self::with_worker(session, worker);
+        app.script = options.script;
+        let wanted = options.scene.or_else(|| app.session.last_scene.clone());
+        if let Some(path) = wanted {
+            app.open_now(&path);
+        }
+        app
+    }
+
+    /// An application with the default scene and no window (tests).
+    pub fn headless() -> Self {
+        Self::with_worker(Session::default(), Worker::start(Box::new(|| {})))
+    }
+
+    fn with_worker(session: Session, worker: Worker) -> Self {
+        let doc = Document {
+            scene: files::default_scene(),
+            internal: InternalSettings::default(),
+        };
+        Self {
+            session,
+            saved: doc.clone(),
+            history: History::new(&doc),
+            doc,
+            path: None,
+            scene_dir: PathBuf::from("."),
+            worker,
+            submitted: None,
+            display: Display::default(),
+            nav: NavState::default(),
+            toasts: Vec::new(),
+            pending_load: None,
+            render_size: [256, 256],
+            change_at: None,
+            latency_ms: Vec::new(),
+            confirm_close: false,
+            close_confirmed: false,
+            script: None,
+            script_state: ScriptState::default(),
+        }
+    }
+
+    /// Whether the document differs from the file.
+    pub fn is_dirty(&self) -> bool {
+        self.doc != self.saved
+    }
+
+    /// Shows an information message.
+    pub fn notify(&mut self, text: impl Into<String>) {
+        self.toasts.push(Toast {
+            text: text.into(),
+            error: false,
+            born: Instant::now(),
+        });
+    }
+
+    /// Shows an error message.
+    pub fn notify_error(&mut self, text: impl Into<String>) {
+        let text = text.into();
+        eprintln!("lantern: {text}");
+        self.toasts.push(Toast {
+            text,
+            error: true,
+            born: Instant::now(),
+        });
+    }
+
+    /// Starts loading a scene (or a volume, wrapped in the current scene)
+    /// in the background; the current document stays until it succeeds.
+    pub fn open(&mut self, path: &Path) {
+        let current = self.doc.scene.clone();
+        self.pending_load = Some(files::load_in_background(path.to_owned(), current));
+    }
+
+    /// Loads a scene synchronously (startup and tests).
+    pub fn open_now(&mut self, path: &Path) {
+        match files::load(path, &self.doc.scene) {
+            Ok(loaded) => self.apply_loaded(loaded),
+            Err(e) => self.notify_error(e),
+        }
+    }
+
+    fn apply_loaded(&mut self, loaded: Loaded) {
+        self.doc = Document {
+            scene: loaded.scene,
+            internal: self.doc.internal.clone(),
+        };
+        self.scene_dir = loaded.scene_dir;
+        self.history = History::new(&self.doc);
+        if loaded.is_scene_file {
+            self.saved = self.doc.clone();
+            self.path = Some(loaded.path.clone());
+            self.session.last_scene = Some(loaded.path.clone());
+        } else {
+            // A volume dropped in: a new, unsaved scene around it.
+            self.saved = Document {
+                scene: Scene::default(),
+                internal: self.doc.internal.clone(),
+            };
+            self.path = None;
+            let aspect = self.render_aspect();
+            super::viewport::frame_bounds(&mut self.doc.scene.camera, loaded.bounds, aspect);
+        }
+        files::push_recent(&mut self.session.recent, &loaded.path);
+        self.notify(format!("opened {}", loaded.path.display()));
+    }
+
+    /// Saves the document to `path`.
+    pub fn save_to(&mut self, path: &Path) {
+        match self.doc.scene.save(path) {
+            Ok(()) => {
+                self.saved = self.doc.clone();
+                self.path = Some(path.to_owned());
+                self.session.last_scene = Some(path.to_owned());
+                files::push_recent(&mut self.session.recent, path);
+                self.notify(format!("saved {}", path.display()));
+            }
+            Err(e) => self.notify_error(format!("{e:#}")),
+        }
+    }
+
+    /// Undoes the last edit.
+    pub fn undo(&mut self) {
+        if !self.history.undo(&mut self.doc) {
+            self.notify("nothing to undo");
+        }
+    }
+
+    /// Redoes the last undone edit.
+    pub fn redo(&mut self) {
+        if !self.history.redo(&mut self.doc) {
+            self.notify("nothing to redo");
+        }
+    }
+
+    /// Width over height of the render.
+    pub fn render_aspect(&self) -> f32 {
+        self.render_size[0] as f32 / self.render_size[1].max(1) as f32
+    }
+
+    /// The job that the current state asks for.
+    pub fn job(&self) -> Job {
+        let mut scene = self.doc.scene.clone();
+        scene.camera.width = self.render_size[0].max(1);
+        scene.camera.height = self.render_size[1].max(1);
+        let mut estimators = self.session.compare.estimators();
+        if !HAS_INTERNAL {
+            estimators.dedup();
+        }
+        Job {
+            scene,
+            internal: self.doc.internal.clone(),
+            scene_dir: self.scene_dir.clone(),
+            estimators,
+            max_spp: self.session.max_spp.max(1),
+        }
+    }
+
+    /// Sends the job to the worker if it changed; returns whether it did.
+    pub fn sync_job(&mut self) -> bool {
+        let job = self.job();
+        if self.submitted.as_ref().map(|(j, _)| j) == Some(&job) {
+            return false;
+        }
+        let generation = self.worker.submit(job.clone());
+        self.submitted = Some((job, generation));
+        self.change_at = Some((generation, Instant::now()));
+        true
+    }
+
+    /// The generation of the job in flight (0 before the first).
+    pub fn generation(&self) -> u64 {
+        self.submitted.as_ref().map_or(0, |(_, g)| *g)
+    }
+
+    /// Draws the whole application into `ui` (one frame).
+    pub fn ui(&mut self, ui: &mut egui::Ui) {
+        let ctx = ui.ctx().clone();
+        for e in self.worker.take_errors() {
+            self.notify_error(e);
+        }
+        self.poll_load();
+        self.handle_dropped_files(&ctx);
+        self.shortcuts(&ctx);
+
+        egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
+        egui::Panel::left("controls")
+            .resizable(true)
+            .default_size(330.0)
+            .show(ui, |ui| super::controls::panel_ui(ui, self));
+        egui::CentralPanel::no_frame().show(ui, |ui| super::viewport::viewport_ui(ui, self));
+
+        if let Some(size) = self.script.as_ref().and_then(|s| s.render_size) {
+            self.render_size = size;
+        }
+        // An edit ends when no mouse button is held.
+        if !ctx.input(|i| i.pointer.any_down()) {
+            self.history.commit(&self.doc);
+        }
+        self.sync_job();
+        if let Some(snapshot) = self.worker.latest() {
+            let generation = snapshot.generation;
+            if self.display.update(&ctx, snapshot, &self.session) {
+                if let Some((g, at)) = self.change_at {
+                    if generation >= g {
+                        self.latency_ms.push(at.elapsed().as_secs_f64() * 1e3);
+                        self.change_at = None;
+                    }
+                }
+            }
+        }
+        self.toasts_ui(&ctx);
+        self.close_ui(&ctx);
+        self.script_step(&ctx);
+    }
+
+    fn poll_load(&mut self) {
+        let Some(rx) = &self.pending_load else {
+            return;
+        };
+        match rx.try_recv() {
+            Ok(Ok(loaded)) => {
+                self.pending_load = None;
+                self.apply_loaded(loaded);
+            }
+            Ok(Err(e)) => {
+                self.pending_load = None;
+                self.notify_error(e);
+            }
+            Err(std::sync::mpsc::TryRecvError::Empty) => {}
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                self.pending_load = None;
+                self.notify_error("the loader stopped unexpectedly");
+            }
+        }
+    }
+
+    fn handle_dropped_files(&mut self, ctx: &egui::Context) {
+        let dropped: Vec<PathBuf> = ctx.input(|i| {
+            i.raw
+                .dropped_files
+                .iter()
+                .map(|f| f.path().to_owned())
+                .collect()
+        });
+        if let Some(path) = dropped.first() {
+            if files::is_openable(path) {
+                self.open(path);
+            } else {
+                self.notify_error(format!(
+                    "{}: not a scene (.ron) or a volume (.vdb, .vol)",
+                    path.display()
+                ));
+            }
+        }
+    }
+
+    fn shortcuts(&mut self, ctx: &egui::Context) {
+        use egui::{Key, KeyboardShortcut, Modifiers};
+        let undo = KeyboardShortcut::new(Modifiers::COMMAND, Key::Z);
+        let redo = KeyboardShortcut::new(Modifiers::COMMAND | Modifiers::SHIFT, Key::Z);
+        let redo_y = KeyboardShortcut::new(Modifiers::COMMAND, Key::Y);
+        let open = KeyboardShortcut::new(Modifiers::COMMAND, Key::O);
+        let save = KeyboardShortcut::new(Modifiers::COMMAND, Key::S);
+        // Longest modifier set first: Ctrl+Shift+Z must not read as Ctrl+Z.
+        if ctx.input_mut(|i| i.consume_shortcut(&redo) || i.consume_shortcut(&redo_y)) {
+            self.redo();
+        }
+        if ctx.input_mut(|i| i.consume_shortcut(&undo)) {
+            self.undo();
+        }
+        if ctx.input_mut(|i| i.consume_shortcut(&open)) {
+            files::open_dialog(self);
+        }
+        if ctx.input_mut(|i| i.consume_shortcut(&save)) {
+            files::save_dialog(self, false);
+        }
+    }
+
+    fn menu_ui(&mut self, ui: &mut egui::Ui) {
+        egui::MenuBar::new().ui(ui, |ui| {
+            ui.menu_button("File", |ui| files::file_menu_ui(ui, self));
+            ui.menu_button("Edit", |ui| {
+                if ui
+                    .add_enabled(self.history.can_undo(), egui::Button::new("Undo"))
+                    .clicked()
+                {
+                    self.undo();
+                }
+                if ui
+                    .add_enabled(self.history.can_redo(), egui::Button::new("Redo"))
+                    .clicked()
+                {
+                    self.redo();
+                }
+            });
+            ui.separator();
+            let name = self
+                .path
+                .as_ref()
+                .and_then(|p| p.file_name())
+                .map_or("untitled".to_string(), |n| n.to_string_lossy().into_owned());
+            let star = if self.is_dirty() { " •" } else { "" };
+            ui.label(format!("{name}{star}"));
+        });
+    }
+
+    fn toasts_ui(&mut self, ctx: &egui::Context) {
+        const LIFE: Duration = Duration::from_secs(6);
+        self.toasts.retain(|t| t.born.elapsed() < LIFE);
+        if self.toasts.is_empty() {
+            return;
+        }
+        egui::Area::new(egui::Id::unique("lantern_toasts"))
+            .anchor(egui::Align2::RIGHT_BOTTOM, [-12.0, -12.0])
+            .order(egui::Order::Foreground)
+            .show(ctx, |ui| {
+                for t in &self.toasts {
+                    let colour = if t.error {
+                        egui::Color32::from_rgb(120, 30, 30)
+                    } else {
+                        egui::Color32::from_rgb(40, 60, 90)
+                    };
+                    egui::Frame::popup(ui.style()).fill(colour).show(ui, |ui| {
+                        ui.set_max_width(420.0);
+                        ui.label(egui::RichText::new(&t.text).color(egui::Color32::WHITE));
+                    });
+                }
+            });
+        ctx.request_repaint_after(Duration::from_millis(500));
+    }
+
+    fn close_ui(&mut self, ctx: &egui::Context) {
+        if ctx.input(|i| i.viewport().close_requested())
+            && self.is_dirty()
+            && !self.close_confirmed
+            && self.script.is_none()
+        {
+            ctx.send_viewport_cmd(egui::ViewportCommand::CancelClose);
+            self.confirm_close = true;
+        }
+        if !self.confirm_close {
+            return;
+        }
+        let modal = egui::Modal::new(egui::Id::unique("lantern_confirm_close")).show(ctx, |ui| {
+            ui.heading("Unsaved changes");
+            ui.label("The scene has changes that are not saved. Quit anyway?");
+            ui.horizontal(|ui| {
+                if ui.button("Save and quit").clicked() {
+                    files::save_dialog(self, false);
+                    if !self.is_dirty() {
+                        self.close_confirmed = true;
+                        self.confirm_close = false;
+                        ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+                    }
+                }
+                if ui.button("Quit without saving").clicked() {
+                    self.close_confirmed = true;
+                    self.confirm_close = false;
+                    ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+                }
+                if ui.button("Cancel").clicked() {
+                    self.confirm_close = false;
+                }
+            });
+        });
+        if modal.should_close() {
+            self.confirm_close = false;
+        }
+    }
+
+    /// Drives a scripted run: waits for samples, then takes a screenshot or
+    /// measures latency by moving the phase slider back and forth.
+    fn script_step(&mut self, ctx: &egui::Context) {
+        let Some(script) = self.script.clone() else {
+            return;
+        };
+        let generation = self.generation();
+        let current = self.display.generation() == generation && generation > 0;
+        let state = &mut self.script_state;
+        let started = *state.started.get_or_insert_with(Instant::now);
+        ctx.request_repaint();
+        if started.elapsed() > script.timeout {
+            eprintln!("lantern: scripted run timed out");
+            std::process::exit(3);
+        }
+        let spp = self.display.spp();
+
+        if state.changes_done < script.latency_changes {
+            // Change g once the previous change has been shown and the image
+            // has been refining for a moment (the change then cancels a
+            // pass in flight, as a person's would).
+            let ready = self.change_at.is_none()
+                && current
+                && state
+                    .last_change
+                    .is_none_or(|t| t.elapsed() > Duration::from_millis(400));
+            if ready {
+                let g = &mut self.doc.scene.medium.g;
+                *g = if *g > 0.5 { 0.3 } else { 0.7 };
+                state.changes_done += 1;
+                state.last_change = Some(Instant::now());
+                if state.changes_done == 1 {
+                    // The first one after start-up measures nothing useful.
+                    self.latency_ms.clear();
+                }
+            }
+            return;
+        }
+        if script.latency_changes > 0 && !state.screenshot_requested {
+            if self.change_at.is_some() {
+                return;
+            }
+            // Drop the start-up image's latency (it includes the density bake).
+            let samples = self.latency_ms.clone();
+            println!("{}", latency_report(&samples, self.render_size));
+            if script.screenshot.is_none() {
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+                return;
+            }
+        }
+        if let Some(path) = &script.screenshot {
+            if !state.screenshot_requested && current && spp >= script.min_spp {
+                state.screenshot_requested = true;
+                let (tx, rx) = std::sync::mpsc::channel();
+                state.screenshot = Some(rx);
+                let repaint = ctx.clone();
+                ctx.request_screenshot(move |image| {
+                    let _ = tx.send(image);
+                    repaint.request_repaint();
+                });
+            }
+            let shot = state.screenshot.as_ref().and_then(|rx| rx.try_recv().ok());
+            if let Some(image) = shot {
+                match files::save_screenshot(path, &image) {
+                    Ok(()) => println!(
+                        "lantern: screenshot at {spp} spp saved to {}",
+                        path.display()
+                    ),
+                    Err(e) => {
+                        eprintln!("lantern: {e}");
+                        std::process::exit(2);
+                    }
+                }
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            }
+        }
+    }
+}
+
+/// One line with the median and spread of measured latencies.
+pub fn latency_report(samples_ms: &[f64], size: [u32; 2]) -> String {
+    let mut s = samples_ms.to_vec();
+    s.sort_by(f64::total_cmp);
+    let median = if s.is_empty() {
+        f64::NAN
+    } else if s.len() % 2 == 1 {
+        s[s.len() / 2]
+    } else {
+        0.5 * (s[s.len() / 2 - 1] + s[s.len() / 2])
+    };
+    format!(
+        "lantern: slider-to-image latency at {}x{}: median {:.1} ms over {} changes (min {:.1}, max {:.1})",
+        size[0],
+        size[1],
+        median,
+        s.len(),
+        s.first().copied().unwrap_or(f64::NAN),
+        s.last().copied().unwrap_or(f64::NAN)
+    )
+}
+
+impl eframe::App for LanternApp {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        LanternApp::ui(self, ui);
+    }
+
+    fn save(&mut self, storage: &mut dyn eframe::Storage) {
+        if self.script.is_none() {
+            eframe::set_value(storage, eframe::APP_KEY, &self.session);
+        }
+    }
+}

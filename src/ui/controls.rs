@@ -1,0 +1,473 @@
+//! The side panel: the method's four knobs (`s*`, `M`, `g`, `N`) first,
+//! then collapsible sections for the medium, the internal lights' finer
+//! settings, the external lights, the render and the view (METHOD.md §3–§7
+//! for what each knob means).
+//!
+//! Widgets edit the document directly; the frame loop notices the change,
+//! restarts the render and records the undo step.
+
+use eframe::egui::{self, Slider, Ui};
+use egui_plot::{Bar, BarChart, Plot};
+use glam::Vec3;
+
+use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
+use super::backend::{ClockKind, HAS_INTERNAL};
+use crate::render::tonemap::ViewTransform;
+use crate::scene::Light;
+
+/// Label of the window-length slider (tests find widgets by label).
+pub const S_STAR: &str = "s* (window)";
+/// Label of the number-of-lights slider.
+pub const LIGHTS: &str = "M (internal lights)";
+/// Label of the phase-function slider.
+pub const PHASE_G: &str = "g (phase)";
+/// Label of the series-truncation slider.
+pub const TERMS: &str = "N (series terms)";
+/// Label of the exposure slider.
+pub const EXPOSURE: &str = "exposure (stops)";
+/// Label of the density-scale slider.
+pub const DENSITY_SCALE: &str = "density scale";
+
+/// Draws the whole panel.
+pub fn panel_ui(ui: &mut Ui, app: &mut LanternApp) {
+    egui::ScrollArea::vertical().show(ui, |ui| {
+        ui.heading("Internal lights");
+        if !HAS_INTERNAL {
+            ui.label(
+                egui::RichText::new(
+                    "This build has no internal-lights renderer yet: every view shows the reference.",
+                )
+                .small()
+                .weak(),
+            );
+        }
+        method_knobs_ui(ui, app);
+        ui.add_space(6.0);
+        egui::CollapsingHeader::new("Medium")
+            .default_open(false)
+            .show(ui, |ui| medium_ui(ui, app));
+        egui::CollapsingHeader::new("Walks, lobes and kernel")
+            .default_open(false)
+            .show(ui, |ui| internal_detail_ui(ui, app));
+        egui::CollapsingHeader::new("Lights")
+            .default_open(false)
+            .show(ui, |ui| lights_ui(ui, app));
+        egui::CollapsingHeader::new("Render")
+            .default_open(true)
+            .show(ui, |ui| render_ui(ui, app));
+        egui::CollapsingHeader::new("View and gizmos")
+            .default_open(true)
+            .show(ui, |ui| view_ui(ui, app));
+        egui::CollapsingHeader::new("Series terms")
+            .default_open(false)
+            .show(ui, |ui| terms_plot_ui(ui, app));
+    });
+}
+
+/// An optional positive value: "auto" or a logarithmic slider.
+fn optional_log_ui(
+    ui: &mut Ui,
+    label: &str,
+    value: &mut Option<f32>,
+    range: std::ops::RangeInclusive<f32>,
+    fallback: f32,
+    tip: &str,
+) {
+    ui.horizontal(|ui| {
+        let mut auto = value.is_none();
+        if ui
+            .checkbox(&mut auto, format!("auto {label}"))
+            .on_hover_text(tip)
+            .changed()
+        {
+            *value = if auto { None } else { Some(fallback) };
+        }
+        if let Some(v) = value {
+            ui.add(Slider::new(v, range).logarithmic(true).text(label))
+                .on_hover_text(tip);
+        }
+    });
+}
+
+fn method_knobs_ui(ui: &mut Ui, app: &mut LanternApp) {
+    let internal = &mut app.doc.internal;
+    optional_log_ui(
+        ui,
+        S_STAR,
+        &mut internal.s_star,
+        0.01..=100.0,
+        1.0,
+        "Window length s*: the path length after which multiply scattered light \
+         becomes an internal light. Short: the final gather is nearly exact \
+         single scattering but many series terms are needed; long: fewer terms, \
+         but two or more scatterings inside the window are lost (darker, \
+         flatter interiors). Units: mean free paths with the optical-depth \
+         clock, world units with the geometric one. Auto: the box's diagonal.",
+    );
+    ui.add(
+        Slider::new(&mut internal.lights, 16..=262_144)
+            .logarithmic(true)
+            .text(LIGHTS),
+    )
+    .on_hover_text(
+        "Number of internal lights M placed in the medium. More lights: smoother \
+         glow, less blotchy noise, slower re-sampling. Physically they are point \
+         samples of the in-flight light J, placed with probability ∝ density.",
+    );
+    ui.add(Slider::new(&mut app.doc.scene.medium.g, -0.95..=0.95).text(PHASE_G))
+        .on_hover_text(
+            "Henyey–Greenstein asymmetry g. Positive: light keeps going forward \
+             (bright silver lining when looking towards the sun, darker backlit \
+             side); 0: isotropic; negative: back-scattering. Mean cosine of the \
+             scattering angle.",
+        );
+    ui.add(
+        Slider::new(&mut internal.terms, 0..=512)
+            .logarithmic(true)
+            .text(TERMS),
+    )
+    .on_hover_text(
+        "Series truncation N: terms k = 0..N of J = Σ G(k s*) S₁. Too few and light \
+         that travels longer than (N+1)·s* is lost (the cloud's core goes dark); \
+         the plot of term energies shows when more terms stop adding light.",
+    );
+}
+
+fn medium_ui(ui: &mut Ui, app: &mut LanternApp) {
+    let m = &mut app.doc.scene.medium;
+    ui.add(
+        Slider::new(&mut m.density_scale, 0.01..=100.0)
+            .logarithmic(true)
+            .text(DENSITY_SCALE),
+    )
+    .on_hover_text(
+        "Multiplies the density everywhere: the cloud's overall thickness. Higher: \
+         more opaque, brighter edges and darker core; extinction scales linearly.",
+    );
+    ui.label("σ_t (extinction per unit density, RGB)")
+        .on_hover_text(
+            "Extinction cross-section per unit density, per channel, in 1/world \
+             units. Unequal channels tint the light that goes deep (e.g. more red \
+             extinction leaves blue-green cores).",
+        );
+    ui.horizontal(|ui| {
+        for (c, name) in ["σ_t R", "σ_t G", "σ_t B"].iter().enumerate() {
+            ui.add(
+                egui::DragValue::new(&mut m.sigma_t[c])
+                    .speed(0.05)
+                    .range(0.0..=10_000.0)
+                    .prefix(format!("{} ", &name[4..])),
+            )
+            .on_hover_text(*name);
+        }
+    });
+    ui.horizontal(|ui| {
+        let mut rgb = [m.albedo.x, m.albedo.y, m.albedo.z];
+        if ui
+            .color_edit_button_rgb(&mut rgb)
+            .on_hover_text(
+                "Single-scattering albedo α (linear RGB): the fraction of extinction \
+                 that scatters rather than absorbs. Near 1: white, glowing clouds; \
+                 lower: dark smoke. Multiple scattering is very sensitive to it.",
+            )
+            .changed()
+        {
+            m.albedo = Vec3::from(rgb).clamp(Vec3::ZERO, Vec3::ONE);
+        }
+        ui.label("albedo");
+    });
+    let mut grey = m.albedo.max_element();
+    if ui
+        .add(Slider::new(&mut grey, 0.0..=1.0).text("albedo (all channels)"))
+        .on_hover_text("Sets the albedo of all channels at once.")
+        .changed()
+    {
+        m.albedo = Vec3::splat(grey);
+    }
+}
+
+fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
+    let s = &mut app.doc.internal;
+    ui.add(
+        Slider::new(&mut s.walks, 1..=4096)
+            .logarithmic(true)
+            .text("K (walks per light)"),
+    )
+    .on_hover_text(
+        "Time-gated random walks per internal light K. More walks: less flicker \
+         between lights, slower re-sampling. Each walk estimates all N+1 terms of \
+         J at the light without bias.",
+    );
+    ui.add(Slider::new(&mut s.sh_order, 0..=8).text("SH order"))
+        .on_hover_text(
+            "Spherical-harmonic order of each light's angular lobe. 0: every light \
+             glows the same in all directions; higher orders keep the forward peak \
+             of J for strongly forward phase functions (costs memory, can ring).",
+        );
+    optional_log_ui(
+        ui,
+        "h (kernel radius)",
+        &mut s.kernel_radius,
+        0.001..=10.0,
+        0.05,
+        "Kernel radius h that spreads each light's J along camera rays. Small: \
+         sharp, blotchy glowing spots; large: smooth but blurred glow (bias). \
+         Auto: the mean spacing of the lights.",
+    );
+    ui.add(Slider::new(&mut s.uniform_mix, 0.0..=1.0).text("u (uniform mix)"))
+        .on_hover_text(
+            "Fraction u of lights placed uniformly in the box rather than by \
+             density. Raise it when light in flight through gaps between puffs \
+             (J in empty space) goes missing.",
+        );
+    egui::ComboBox::from_label("clock")
+        .selected_text(match s.clock {
+            ClockKind::Geometric => "geometric",
+            ClockKind::OpticalDepth => "optical depth",
+        })
+        .show_ui(ui, |ui| {
+            ui.selectable_value(&mut s.clock, ClockKind::OpticalDepth, "optical depth");
+            ui.selectable_value(&mut s.clock, ClockKind::Geometric, "geometric");
+        })
+        .response
+        .on_hover_text(
+            "What the path-length clock counts. Optical depth: s* in mean free \
+             paths, so every window holds about s* collisions in thin and thick \
+             parts alike. Geometric: s* is a distance, as in Tessendorf's note.",
+        );
+    ui.add(Slider::new(&mut s.light_samples, 1..=64).text("light samples"))
+        .on_hover_text(
+            "Internal lights gathered per camera sample. More: less noise per pass, \
+             slower passes.",
+        );
+}
+
+fn lights_ui(ui: &mut Ui, app: &mut LanternApp) {
+    let lights = &mut app.doc.scene.lights;
+    let mut remove = None;
+    for (i, light) in lights.iter_mut().enumerate() {
+        ui.push_id(i, |ui| match light {
+            Light::Sun {
+                direction,
+                irradiance,
+            } => {
+                ui.label(egui::RichText::new("Sun").strong());
+                sun_direction_ui(ui, direction);
+                rgb_intensity_ui(
+                    ui,
+                    irradiance,
+                    "sun irradiance",
+                    "Irradiance of the sun in W/m² on a surface facing it (colour × \
+                     strength). Brightens everything linearly.",
+                );
+            }
+            Light::Point {
+                position,
+                intensity,
+            } => {
+                ui.horizontal(|ui| {
+                    ui.label(egui::RichText::new("Point light").strong());
+                    if ui.small_button("remove").clicked() {
+                        remove = Some(i);
+                    }
+                });
+                ui.horizontal(|ui| {
+                    for c in 0..3 {
+                        ui.add(egui::DragValue::new(&mut position[c]).speed(0.01))
+                            .on_hover_text("Position of the point light (world units).");
+                    }
+                });
+                rgb_intensity_ui(
+                    ui,
+                    intensity,
+                    "point intensity",
+                    "Intensity in W/sr (colour × strength); falls off as 1/r².",
+                );
+            }
+        });
+        ui.separator();
+    }
+    if let Some(i) = remove {
+        lights.remove(i);
+    }
+    if ui.button("Add point light").clicked() {
+        lights.push(Light::Point {
+            position: Vec3::new(0.0, 0.0, 0.0),
+            intensity: Vec3::splat(1.0),
+        });
+    }
+}
+
+/// Elevation and azimuth of the direction the sun shines *from*.
+fn sun_direction_ui(ui: &mut Ui, direction: &mut Vec3) {
+    let from = (-*direction).normalize_or_zero();
+    let mut elevation = from.y.clamp(-1.0, 1.0).asin().to_degrees();
+    let mut azimuth = from.x.atan2(from.z).to_degrees();
+    let tip = "Where the sun is: elevation above the horizon and azimuth around the \
+               vertical. Drag the sun gizmo in the viewport for the same.";
+    let a = ui
+        .add(Slider::new(&mut elevation, -89.0..=89.0).text("sun elevation (°)"))
+        .on_hover_text(tip);
+    let b = ui
+        .add(Slider::new(&mut azimuth, -180.0..=180.0).text("sun azimuth (°)"))
+        .on_hover_text(tip);
+    if a.changed() || b.changed() {
+        let (el, az) = (elevation.to_radians(), azimuth.to_radians());
+        *direction = -Vec3::new(el.cos() * az.sin(), el.sin(), el.cos() * az.cos());
+    }
+}
+
+/// An RGB radiometric quantity as a colour and a logarithmic strength.
+fn rgb_intensity_ui(ui: &mut Ui, value: &mut Vec3, label: &str, tip: &str) {
+    let strength = value.max_element();
+    let tint = if strength > 0.0 {
+        *value / strength
+    } else {
+        Vec3::ONE
+    };
+    let mut rgb = [tint.x, tint.y, tint.z];
+    let mut s = strength;
+    ui.horizontal(|ui| {
+        let c = ui.color_edit_button_rgb(&mut rgb).on_hover_text(tip);
+        let r = ui
+            .add(
+                Slider::new(&mut s, 0.0..=1000.0)
+                    .logarithmic(true)
+                    .text(label),
+            )
+            .on_hover_text(tip);
+        if c.changed() || r.changed() {
+            *value = Vec3::from(rgb).max(Vec3::ZERO) * s;
+        }
+    });
+}
+
+fn render_ui(ui: &mut Ui, app: &mut LanternApp) {
+    let session = &mut app.session;
+    ui.horizontal_wrapped(|ui| {
+        for (mode, name, tip) in [
+            (
+                CompareMode::Internal,
+                "Internal lights",
+                "The internal-lights approximation.",
+            ),
+            (
+                CompareMode::Reference,
+                "Reference",
+                "The unbiased path tracer: the ground truth.",
+            ),
+            (
+                CompareMode::Split,
+                "Split",
+                "Internal lights left, reference right; drag the divider.",
+            ),
+            (
+                CompareMode::Error,
+                "Error",
+                "Heatmap of |internal − reference| with its RMSE (the reference's \
+                 own noise is included and shrinks as it refines).",
+            ),
+        ] {
+            ui.selectable_value(&mut session.compare, mode, name)
+                .on_hover_text(tip);
+        }
+    });
+    ui.add(Slider::new(&mut session.res_scale, 0.1..=1.0).text("resolution scale"))
+        .on_hover_text(
+            "Render resolution relative to the viewport's pixels. Lower: faster \
+         feedback, blurrier image.",
+        );
+    ui.add(
+        Slider::new(&mut session.max_spp, 1..=65_536)
+            .logarithmic(true)
+            .text("max spp"),
+    )
+    .on_hover_text("The image stops refining at this many samples per pixel.");
+    ui.horizontal(|ui| {
+        ui.add(egui::DragValue::new(&mut app.doc.scene.render.seed).prefix("seed "))
+            .on_hover_text(
+                "Seed of every random stream: the same seed gives the same image \
+                 and the same internal lights.",
+            );
+    });
+}
+
+fn view_ui(ui: &mut Ui, app: &mut LanternApp) {
+    let s = &mut app.session;
+    ui.add(Slider::new(&mut s.exposure, -10.0..=10.0).text(EXPOSURE))
+        .on_hover_text("Display exposure: multiplies the shown image by 2^stops. Display only.");
+    egui::ComboBox::from_label("view transform")
+        .selected_text(match s.view {
+            ViewTransform::Filmic => "filmic",
+            ViewTransform::Clamp => "sRGB clamp",
+        })
+        .show_ui(ui, |ui| {
+            ui.selectable_value(&mut s.view, ViewTransform::Filmic, "filmic");
+            ui.selectable_value(&mut s.view, ViewTransform::Clamp, "sRGB clamp");
+        })
+        .response
+        .on_hover_text(
+            "Filmic rolls highlights off smoothly (ACES fit); sRGB clamp clips \
+             linear values above 1. Display and PNG only; EXR stays linear.",
+        );
+    egui::ComboBox::from_label("mouse")
+        .selected_text(match s.nav {
+            NavPreset::Blender => "Blender",
+            NavPreset::AltDrag => "Maya / Houdini (Alt-drag)",
+        })
+        .show_ui(ui, |ui| {
+            ui.selectable_value(&mut s.nav, NavPreset::Blender, "Blender");
+            ui.selectable_value(&mut s.nav, NavPreset::AltDrag, "Maya / Houdini (Alt-drag)");
+        })
+        .response
+        .on_hover_text(
+            "Blender: middle-drag orbits, Shift+middle pans, Ctrl+middle or wheel \
+             zooms. Maya/Houdini: Alt+left orbits, Alt+middle pans, Alt+right \
+             zooms. F frames the volume.",
+        );
+    ui.checkbox(&mut s.show_box, "medium box");
+    ui.checkbox(&mut s.show_sun, "sun gizmo");
+    ui.checkbox(&mut s.show_lights, "internal lights");
+    ui.horizontal(|ui| {
+        ui.selectable_value(&mut s.quantity, LightQuantity::F, "F")
+            .on_hover_text("Size and colour the lights by F = G(s*) S₁, the first gated term.");
+        ui.selectable_value(&mut s.quantity, LightQuantity::J, "J")
+            .on_hover_text("Size and colour the lights by J, the whole series.");
+        ui.checkbox(&mut s.log_strength, "log scale");
+    });
+    ui.checkbox(
+        &mut s.contributors_only,
+        "only lights lighting the cursor's pixel",
+    )
+    .on_hover_text(
+        "Shows only the internal lights that contribute to the pixel under the \
+             cursor, with their shares.",
+    );
+    if !app.latency_ms.is_empty() {
+        ui.label(
+            egui::RichText::new(super::app::latency_report(&app.latency_ms, app.render_size))
+                .small()
+                .weak(),
+        );
+    }
+}
+
+fn terms_plot_ui(ui: &mut Ui, app: &mut LanternApp) {
+    let Some(lights) = app.display.lights() else {
+        ui.label("The energy of each series term appears once internal lights are sampled.");
+        return;
+    };
+    let bars: Vec<Bar> = lights
+        .term_energy
+        .iter()
+        .enumerate()
+        .map(|(k, e)| Bar::new(k as f64, e.dot(Vec3::splat(1.0 / 3.0)) as f64))
+        .collect();
+    Plot::new("term_energy")
+        .height(140.0)
+        .x_axis_label("term k")
+        .y_axis_label("energy")
+        .show(ui, |plot| {
+            plot.bar_chart(BarChart::new("energy of term k", bars))
+        });
+}

@@ -1,0 +1,387 @@
+//! Files: opening and saving scenes (RON) with native dialogs, drag and drop
+//! of scenes and volumes, recent files, the example scenes as presets, and
+//! export of the still frame (32-bit float EXR with the render settings as
+//! metadata and optional layers, or display-transformed PNG).
+//!
+//! Loading runs on a background thread and is validated completely (the
+//! density is read too) before the current scene is replaced, so a bad file
+//! only produces a notification.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, Receiver};
+
+use eframe::egui;
+use glam::Vec3;
+
+use super::app::LanternApp;
+use super::backend::{Estimator, Snapshot};
+use crate::render::export::extension;
+use crate::render::tonemap::to_srgb8;
+use crate::scene::{DensitySource, GridFormat, GridSource, Scene};
+
+/// Largest number of recent files remembered.
+const RECENT_LIMIT: usize = 10;
+
+/// The example scenes, built in so that they work from any folder; grids
+/// are looked up in the source tree's `assets/scenes`.
+pub const PRESETS: &[(&str, &str)] = &[
+    (
+        "Cumulus cloud",
+        include_str!("../../assets/scenes/cloud.ron"),
+    ),
+    (
+        "Thin sphere",
+        include_str!("../../assets/scenes/thin_sphere.ron"),
+    ),
+    (
+        "Chromatic sphere",
+        include_str!("../../assets/scenes/chromatic_sphere.ron"),
+    ),
+    (
+        "Puffs (voxel grid)",
+        include_str!("../../assets/scenes/puffs_grid.ron"),
+    ),
+    (
+        "Smoke box (point light)",
+        include_str!("../../assets/scenes/smoke_box.ron"),
+    ),
+];
+
+/// The folder the presets' relative paths refer to.
+pub fn presets_dir() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/assets/scenes"))
+}
+
+/// The scene shown before anything is opened: the cumulus preset.
+pub fn default_scene() -> Scene {
+    Scene::from_ron(PRESETS[0].1, Path::new("cloud.ron")).unwrap_or_default()
+}
+
+/// A successfully loaded file.
+#[derive(Clone, Debug)]
+pub struct Loaded {
+    /// The file opened.
+    pub path: PathBuf,
+    /// The resulting scene.
+    pub scene: Scene,
+    /// The folder that the scene's relative paths refer to.
+    pub scene_dir: PathBuf,
+    /// A scene file (as opposed to a volume wrapped in the current scene).
+    pub is_scene_file: bool,
+    /// The medium's world box.
+    pub bounds: (Vec3, Vec3),
+}
+
+/// Whether a dropped file is something the previewer opens.
+pub fn is_openable(path: &Path) -> bool {
+    matches!(extension(path).as_deref(), Some("ron" | "vdb" | "vol"))
+}
+
+/// Loads a scene file, or wraps a `.vdb`/`.vol` volume in `current`, and
+/// checks that its density loads.
+pub fn load(path: &Path, current: &Scene) -> Result<Loaded, String> {
+    let dir = path
+        .parent()
+        .map(Path::to_owned)
+        .unwrap_or_else(|| PathBuf::from("."));
+    let (scene, is_scene_file) = match extension(path).as_deref() {
+        Some("ron") => (Scene::load(path).map_err(|e| format!("{e:#}"))?, true),
+        Some("vdb" | "vol") => {
+            let mut scene = current.clone();
+            let name = path.file_name().map(PathBuf::from).unwrap_or_default();
+            scene.medium.density = DensitySource::Grid(GridSource {
+                path: name,
+                format: GridFormat::Auto,
+                grid_name: None,
+                bounds: None,
+            });
+            (scene, false)
+        }
+        _ => {
+            return Err(format!(
+                "{}: not a scene (.ron) or a volume (.vdb, .vol)",
+                path.display()
+            ))
+        }
+    };
+    let density = scene
+        .load_density(&dir)
+        .map_err(|e| format!("cannot open {}: {e:#}", path.display()))?;
+    Ok(Loaded {
+        path: path.to_owned(),
+        scene,
+        scene_dir: dir,
+        is_scene_file,
+        bounds: density.bounds(),
+    })
+}
+
+/// [`load`] on a background thread.
+pub fn load_in_background(path: PathBuf, current: Scene) -> Receiver<Result<Loaded, String>> {
+    let (tx, rx) = mpsc::channel();
+    let spawned = std::thread::Builder::new()
+        .name("lantern-load".into())
+        .spawn(move || {
+            let _ = tx.send(load(&path, &current));
+        });
+    if spawned.is_err() {
+        // The receiver then reports a disconnected loader.
+    }
+    rx
+}
+
+/// Moves `path` to the front of the recent list.
+pub fn push_recent(recent: &mut Vec<PathBuf>, path: &Path) {
+    let path = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_owned());
+    recent.retain(|p| *p != path);
+    recent.insert(0, path);
+    recent.truncate(RECENT_LIMIT);
+}
+
+/// Asks for a scene or volume to open.
+pub fn open_dialog(app: &mut LanternApp) {
+    let picked = rfd::FileDialog::new()
+        .add_filter("Scenes and volumes", &["ron", "vdb", "vol"])
+        .pick_file();
+    if let Some(path) = picked {
+        app.open(&path);
+    }
+}
+
+/// Saves the scene: to its file, or (`save_as`, or no file yet) where the
+/// user says.
+pub fn save_dialog(app: &mut LanternApp, save_as: bool) {
+    let target = match (&app.path, save_as) {
+        (Some(p), false) => Some(p.clone()),
+        _ => rfd::FileDialog::new()
+            .add_filter("Lantern scene", &["ron"])
+            .set_file_name("scene.ron")
+            .save_file(),
+    };
+    if let Some(path) = target {
+        app.save_to(&path);
+    }
+}
+
+/// Which layers an EXR export carries besides the beauty image.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ExportLayers {
+    /// The single-scatter part.
+    pub single: bool,
+    /// The internal-light part.
+    pub internal: bool,
+}
+
+/// The File menu.
+pub fn file_menu_ui(ui: &mut egui::Ui, app: &mut LanternApp) {
+    if ui.button("Open…").clicked() {
+        ui.close();
+        open_dialog(app);
+    }
+    if ui.button("Save").clicked() {
+        ui.close();
+        save_dialog(app, false);
+    }
+    if ui.button("Save as…").clicked() {
+        ui.close();
+        save_dialog(app, true);
+    }
+    ui.menu_button("Open recent", |ui| {
+        if app.session.recent.is_empty() {
+            ui.label("(none)");
+        }
+        let mut chosen = None;
+        for p in &app.session.recent {
+            if ui.button(p.display().to_string()).clicked() {
+                chosen = Some(p.clone());
+            }
+        }
+        if let Some(p) = chosen {
+            ui.close();
+            app.open(&p);
+        }
+    });
+    ui.menu_button("Example scenes", |ui| {
+        for (name, text) in PRESETS {
+            if ui.button(*name).clicked() {
+                ui.close();
+                open_preset(app, name, text);
+            }
+        }
+    });
+    ui.separator();
+    if ui.button("Export EXR (linear, float)…").clicked() {
+        ui.close();
+        export_dialog(app, "exr");
+    }
+    if ui.button("Export PNG (as displayed)…").clicked() {
+        ui.close();
+        export_dialog(app, "png");
+    }
+}
+
+/// Replaces the document with an example scene.
+pub fn open_preset(app: &mut LanternApp, name: &str, text: &str) {
+    match Scene::from_ron(text, Path::new(name)) {
+        Ok(scene) => {
+            app.doc.scene = scene;
+            app.scene_dir = presets_dir();
+            app.path = None;
+            app.notify(format!("example scene: {name}"));
+        }
+        Err(e) => app.notify_error(format!("{e:#}")),
+    }
+}
+
+fn export_dialog(app: &mut LanternApp, ext: &str) {
+    let target = rfd::FileDialog::new()
+        .add_filter(ext.to_uppercase(), &[ext])
+        .set_file_name(format!("lantern.{ext}"))
+        .save_file();
+    if let Some(path) = target {
+        let result = app
+            .display
+            .snapshot()
+            .ok_or_else(|| "nothing rendered yet".to_string())
+            .and_then(|s| export(&path, &s, app));
+        match result {
+            Ok(()) => app.notify(format!("exported {}", path.display())),
+            Err(e) => app.notify_error(e),
+        }
+    }
+}
+
+/// Writes the shown image: `.exr` linear with metadata and layers, `.png`
+/// after the display transform.
+pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), String> {
+    let shown = app.display.shown_estimator(app.session.compare);
+    let stream = snapshot
+        .streams
+        .iter()
+        .find(|s| s.estimator == shown)
+        .or_else(|| snapshot.streams.first())
+        .ok_or_else(|| "nothing rendered yet".to_string())?;
+    match extension(path).as_deref() {
+        Some("exr") => {
+            let mut meta = render_metadata(app);
+            meta.push(("spp".into(), stream.spp.to_string()));
+            meta.push((
+                "method".into(),
+                match stream.estimator {
+                    Estimator::Internal => "internal".into(),
+                    Estimator::Reference => "reference".into(),
+                },
+            ));
+            let mut layers: Vec<(&str, &[Vec3])> = Vec::new();
+            if let Some(single) = &stream.single {
+                layers.push(("single", single));
+            }
+            if let Some(internal) = &stream.internal {
+                layers.push(("internal", internal));
+            }
+            write_exr_with_metadata(
+                path,
+                stream.width,
+                stream.height,
+                &stream.mean,
+                &layers,
+                &meta,
+            )
+        }
+        Some("png") => {
+            let bytes = to_srgb8(&stream.mean, app.session.exposure, app.session.view);
+            image::save_buffer(
+                path,
+                &bytes,
+                stream.width,
+                stream.height,
+                image::ColorType::Rgb8,
+            )
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))
+        }
+        _ => Err(format!(
+            "{}: unsupported image format (use .exr or .png)",
+            path.display()
+        )),
+    }
+}
+
+/// The render settings written into an EXR header.
+pub fn render_metadata(app: &LanternApp) -> Vec<(String, String)> {
+    let i = &app.doc.internal;
+    let s = &app.doc.scene;
+    vec![
+        (
+            "lantern/s_star".into(),
+            i.s_star.map_or("auto".into(), |v| v.to_string()),
+        ),
+        ("lantern/M".into(), i.lights.to_string()),
+        ("lantern/g".into(), s.medium.g.to_string()),
+        ("lantern/N".into(), i.terms.to_string()),
+        ("lantern/K".into(), i.walks.to_string()),
+        ("lantern/sh_order".into(), i.sh_order.to_string()),
+        ("lantern/seed".into(), s.render.seed.to_string()),
+    ]
+}
+
+/// Writes 32-bit float linear RGB with extra layers (`NAME.R`, `NAME.G`,
+/// `NAME.B` channels) and text attributes.
+pub fn write_exr_with_metadata(
+    path: &Path,
+    width: u32,
+    height: u32,
+    beauty: &[Vec3],
+    layers: &[(&str, &[Vec3])],
+    metadata: &[(String, String)],
+) -> Result<(), String> {
+    use exr::prelude::*;
+    let fail = |e: &dyn std::fmt::Display| format!("cannot write {}: {e}", path.display());
+    let n = width as usize * height as usize;
+    if beauty.len() != n || layers.iter().any(|(_, l)| l.len() != n) {
+        return Err(fail(&"image size mismatch"));
+    }
+    let mut channels: Vec<AnyChannel<FlatSamples>> = Vec::new();
+    let mut add = |prefix: &str, pixels: &[Vec3]| {
+        for (c, name) in ["R", "G", "B"].iter().enumerate() {
+            let full = if prefix.is_empty() {
+                (*name).to_string()
+            } else {
+                format!("{prefix}.{name}")
+            };
+            let samples = pixels.iter().map(|p| p[c]).collect();
+            channels.push(AnyChannel::new(full.as_str(), FlatSamples::F32(samples)));
+        }
+    };
+    add("", beauty);
+    for (name, pixels) in layers {
+        add(name, pixels);
+    }
+    let size = (width as usize, height as usize);
+    let layer = Layer::new(
+        size,
+        LayerAttributes::default(),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels.into()),
+    );
+    let mut image = Image::from_layer(layer);
+    let mut other = HashMap::new();
+    for (k, v) in metadata {
+        let key = Text::new_or_none(k).ok_or_else(|| fail(&format!("bad key {k}")))?;
+        let value = Text::new_or_none(v).ok_or_else(|| fail(&format!("bad value {v}")))?;
+        other.insert(key, AttributeValue::Text(value));
+    }
+    image.attributes.other = other;
+    image.write().to_file(path).map_err(|e| fail(&e))
+}
+
+/// Saves a screenshot of the window as PNG.
+pub fn save_screenshot(path: &Path, image: &egui::ColorImage) -> Result<(), String> {
+    let [w, h] = image.size;
+    let mut bytes = Vec::with_capacity(w * h * 4);
+    for p in &image.pixels {
+        bytes.extend_from_slice(&p.to_array());
+    }
+    image::save_buffer(path, &bytes, w as u32, h as u32, image::ColorType::Rgba8)
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+}

@@ -1,0 +1,148 @@
+//! The previewer's controls, driven by their labels with egui_kittest (no
+//! window, no GPU): moving a slider changes the settings, restarts the
+//! image, and can be undone.
+
+use std::time::{Duration, Instant};
+
+use eframe::egui;
+use egui_kittest::kittest::{NodeT, Queryable};
+use egui_kittest::Harness;
+use lantern::ui::controls;
+use lantern::ui::LanternApp;
+
+fn harness() -> Harness<'static, LanternApp> {
+    let mut app = LanternApp::headless();
+    // A small image keeps the passes short in tests.
+    app.session.res_scale = 0.1;
+    Harness::builder()
+        .with_size([1200.0, 800.0])
+        .with_accessibility_check(false)
+        .build_ui_state(|ui, app: &mut LanternApp| app.ui(ui), app)
+}
+
+/// Steps the UI until the worker shows an image of the current job.
+fn wait_for_image(h: &mut Harness<'static, LanternApp>) {
+    let start = Instant::now();
+    loop {
+        h.step();
+        let app = h.state();
+        if app.generation() > 0 && app.display.generation() == app.generation() {
+            return;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no image for generation {} (showing {})",
+            app.generation(),
+            app.display.generation()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn slider(h: &Harness<'static, LanternApp>, label: &str) -> f64 {
+    let node = h.get_by_role_and_label(egui::accesskit::Role::Slider, label);
+    node.accesskit_node()
+        .numeric_value()
+        .unwrap_or_else(|| panic!("slider {label} has no value"))
+}
+
+#[test]
+fn moving_the_four_knobs_changes_the_settings_and_restarts_the_image() {
+    let mut h = harness();
+    h.run_steps(3);
+    wait_for_image(&mut h);
+    let first = h.state().generation();
+
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::PHASE_G)
+        .set_value_accesskit(0.2);
+    h.run_steps(2);
+    assert!((h.state().doc.scene.medium.g - 0.2).abs() < 1e-6);
+    assert!((slider(&h, controls::PHASE_G) - 0.2).abs() < 1e-6);
+    assert!(h.state().generation() > first, "the image did not restart");
+    wait_for_image(&mut h);
+
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::LIGHTS)
+        .set_value_accesskit(1000.0);
+    h.run_steps(2);
+    assert_eq!(h.state().doc.internal.lights, 1000);
+
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::TERMS)
+        .set_value_accesskit(5.0);
+    h.run_steps(2);
+    assert_eq!(h.state().doc.internal.terms, 5);
+
+    // s* starts automatic; unticking "auto" shows its slider.
+    assert_eq!(h.state().doc.internal.s_star, None);
+    h.get_by_label(&format!("auto {}", controls::S_STAR))
+        .click();
+    h.run_steps(2);
+    assert_eq!(h.state().doc.internal.s_star, Some(1.0));
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::S_STAR)
+        .set_value_accesskit(2.5);
+    h.run_steps(2);
+    assert_eq!(h.state().doc.internal.s_star, Some(2.5));
+    let before = h.state().generation();
+    wait_for_image(&mut h);
+    assert!(h.state().generation() >= before);
+}
+
+#[test]
+fn undo_and_redo_restore_parameter_edits() {
+    let mut h = harness();
+    h.run_steps(3);
+    let g0 = h.state().doc.scene.medium.g;
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::PHASE_G)
+        .set_value_accesskit(-0.3);
+    h.run_steps(2);
+    assert!((h.state().doc.scene.medium.g + 0.3).abs() < 1e-6);
+    assert!(h.state().is_dirty());
+
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run_steps(2);
+    assert!((h.state().doc.scene.medium.g - g0).abs() < 1e-6, "undo");
+    assert!(!h.state().is_dirty());
+
+    h.key_press_modifiers(
+        egui::Modifiers::COMMAND | egui::Modifiers::SHIFT,
+        egui::Key::Z,
+    );
+    h.run_steps(2);
+    assert!((h.state().doc.scene.medium.g + 0.3).abs() < 1e-6, "redo");
+}
+
+#[test]
+fn exposure_is_display_only() {
+    let mut h = harness();
+    h.run_steps(3);
+    wait_for_image(&mut h);
+    let generation = h.state().generation();
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::EXPOSURE)
+        .set_value_accesskit(2.0);
+    h.run_steps(2);
+    assert_eq!(h.state().session.exposure, 2.0);
+    assert_eq!(
+        h.state().generation(),
+        generation,
+        "exposure must not restart the render"
+    );
+}
+
+#[test]
+fn a_bad_scene_file_keeps_the_current_scene_and_says_why() {
+    let mut h = harness();
+    h.run_steps(2);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let bad = dir.path().join("broken.ron");
+    std::fs::write(&bad, "( camera: oops )").expect("write");
+    let before = h.state().doc.clone();
+    h.state_mut().open_now(&bad);
+    h.run_steps(2);
+    assert_eq!(h.state().doc, before);
+    let toast = h
+        .state()
+        .toasts
+        .iter()
+        .find(|t| t.error)
+        .expect("an error notification");
+    assert!(toast.text.contains("broken.ron"), "{}", toast.text);
+}
