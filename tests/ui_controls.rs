@@ -64,23 +64,23 @@ fn moving_the_four_knobs_changes_the_settings_and_restarts_the_image() {
     h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::LIGHTS)
         .set_value_accesskit(1000.0);
     h.run_steps(2);
-    assert_eq!(h.state().doc.internal.lights, 1000);
+    assert_eq!(h.state().doc.scene.render.internal.lights, 1000);
 
     h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::TERMS)
         .set_value_accesskit(5.0);
     h.run_steps(2);
-    assert_eq!(h.state().doc.internal.terms, 5);
+    assert_eq!(h.state().doc.scene.render.internal.terms, 5);
 
     // s* starts automatic; unticking "auto" shows its slider.
-    assert_eq!(h.state().doc.internal.s_star, None);
+    assert_eq!(h.state().doc.scene.render.internal.s_star, None);
     h.get_by_label(&format!("auto {}", controls::S_STAR))
         .click();
     h.run_steps(2);
-    assert_eq!(h.state().doc.internal.s_star, Some(1.0));
+    assert_eq!(h.state().doc.scene.render.internal.s_star, Some(1.0));
     h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::S_STAR)
         .set_value_accesskit(2.5);
     h.run_steps(2);
-    assert_eq!(h.state().doc.internal.s_star, Some(2.5));
+    assert_eq!(h.state().doc.scene.render.internal.s_star, Some(2.5));
     let before = h.state().generation();
     wait_for_image(&mut h);
     assert!(h.state().generation() >= before);

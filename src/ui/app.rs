@@ -13,20 +13,19 @@ use std::time::{Duration, Instant};
 use eframe::egui;
 use serde::{Deserialize, Serialize};
 
-use super::backend::{Estimator, InternalSettings, Job, Worker, HAS_INTERNAL};
+use super::backend::{Estimator, Job, Worker, HAS_INTERNAL};
 use super::files::{self, Loaded};
 use super::viewport::{Display, NavState};
 use super::LaunchOptions;
 use crate::render::tonemap::ViewTransform;
-use crate::scene::Scene;
+use crate::scene::{Method, Scene};
 
-/// What is edited, saved and undone: the scene and the method's settings.
+/// What is edited, saved and undone: the scene, with the method's
+/// settings in `scene.render`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Document {
     /// The scene.
     pub scene: Scene,
-    /// The internal-lights settings.
-    pub internal: InternalSettings,
 }
 
 /// What the viewport shows.
@@ -148,6 +147,9 @@ pub struct Script {
     pub timeout: Duration,
     /// Render at exactly this size instead of the viewport's.
     pub render_size: Option<[u32; 2]>,
+    /// What the viewport shows (`LANTERN_VIEW`: internal, reference, split
+    /// or error); default: the scene's method.
+    pub compare: Option<CompareMode>,
 }
 
 impl Script {
@@ -174,6 +176,13 @@ impl Script {
                     .and_then(|v| v.parse().ok())
                     .unwrap_or(300),
             ),
+            compare: var("LANTERN_VIEW").and_then(|v| match v.as_str() {
+                "internal" => Some(CompareMode::Internal),
+                "reference" => Some(CompareMode::Reference),
+                "split" => Some(CompareMode::Split),
+                "error" => Some(CompareMode::Error),
+                _ => None,
+            }),
             render_size: var("LANTERN_RENDER_SIZE").and_then(|v| {
                 let (w, h) = v.split_once('x')?;
                 Some([w.parse().ok()?, h.parse().ok()?])
@@ -303,6 +312,8 @@ pub struct LanternApp {
     pending_load: Option<Receiver<Result<Loaded, String>>>,
     /// The viewport's render size in pixels (after the resolution scale).
     pub render_size: [u32; 2],
+    /// Render at this size whatever the viewport's (scripted runs).
+    pub forced_render_size: Option<[u32; 2]>,
     /// When the job of each pending generation was submitted (latency).
     change_at: Option<(u64, Instant)>,
     /// Slider-to-image latencies measured, in milliseconds.
@@ -329,10 +340,14 @@ impl LanternApp {
         let ctx = cc.egui_ctx.clone();
         let worker = Worker::start(Box::new(move || ctx.request_repaint()));
         let mut app = Self::with_worker(session, worker);
+        app.forced_render_size = options.script.as_ref().and_then(|s| s.render_size);
         app.script = options.script;
         let wanted = options.scene.or_else(|| app.session.last_scene.clone());
         if let Some(path) = wanted {
             app.open_now(&path);
+        }
+        if let Some(mode) = app.script.as_ref().and_then(|s| s.compare) {
+            app.session.compare = mode;
         }
         app
     }
@@ -345,7 +360,6 @@ impl LanternApp {
     fn with_worker(session: Session, worker: Worker) -> Self {
         let doc = Document {
             scene: files::default_scene(),
-            internal: InternalSettings::default(),
         };
         Self {
             session,
@@ -361,6 +375,7 @@ impl LanternApp {
             toasts: Vec::new(),
             pending_load: None,
             render_size: [256, 256],
+            forced_render_size: None,
             change_at: None,
             latency_ms: Vec::new(),
             confirm_close: false,
@@ -411,9 +426,12 @@ impl LanternApp {
     }
 
     fn apply_loaded(&mut self, loaded: Loaded) {
+        self.session.compare = match loaded.scene.render.method {
+            Method::Internal => CompareMode::Internal,
+            Method::Reference => CompareMode::Reference,
+        };
         self.doc = Document {
             scene: loaded.scene,
-            internal: self.doc.internal.clone(),
         };
         self.scene_dir = loaded.scene_dir;
         self.history = History::new(&self.doc);
@@ -425,7 +443,6 @@ impl LanternApp {
             // A volume dropped in: a new, unsaved scene around it.
             self.saved = Document {
                 scene: Scene::default(),
-                internal: self.doc.internal.clone(),
             };
             self.path = None;
             let aspect = self.render_aspect();
@@ -479,7 +496,6 @@ impl LanternApp {
         }
         Job {
             scene,
-            internal: self.doc.internal.clone(),
             scene_dir: self.scene_dir.clone(),
             estimators,
             max_spp: self.session.max_spp.max(1),
@@ -520,9 +536,6 @@ impl LanternApp {
             .show(ui, |ui| super::controls::panel_ui(ui, self));
         egui::CentralPanel::no_frame().show(ui, |ui| super::viewport::viewport_ui(ui, self));
 
-        if let Some(size) = self.script.as_ref().and_then(|s| s.render_size) {
-            self.render_size = size;
-        }
         // An edit ends when no mouse button is held.
         if !ctx.input(|i| i.pointer.any_down()) {
             self.history.commit(&self.doc);

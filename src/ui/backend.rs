@@ -14,7 +14,7 @@
 //! Nothing here knows of egui: the worker wakes the UI through a plain
 //! callback.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::sync::{Arc, Mutex};
@@ -23,87 +23,32 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 
+use crate::cpu::Renderer;
+use crate::physics::gated_walk::Clock;
+use crate::physics::internal::InternalLights;
 use crate::render::{Film, Prepared};
 use crate::scene::{Density, DensitySource, Method, Scene};
 
-pub use compat::{ClockKind, InternalSettings};
-
-/// The internal-lights settings, mirrored here until the internal-lights
-/// renderer lands in `scene::settings`; the fields are those of the
-/// announced API so that only this module changes when it does.
-mod compat {
-    use serde::{Deserialize, Serialize};
-
-    /// What the path-length clock counts (METHOD.md §3).
-    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-    pub enum ClockKind {
-        /// Geometric path length: `s*` is a distance.
-        Geometric,
-        /// Optical depth: `s*` is a number of mean free paths.
-        #[default]
-        OpticalDepth,
-    }
-
-    /// Parameters of the internal-lights method (METHOD.md §3–§7).
-    #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-    #[serde(default)]
-    pub struct InternalSettings {
-        /// Window length `s*`; `None`: automatic.
-        pub s_star: Option<f32>,
-        /// Number of internal lights `M`.
-        pub lights: u32,
-        /// Series truncation `N`.
-        pub terms: u32,
-        /// Time-gated walks per light `K`.
-        pub walks: u32,
-        /// Spherical-harmonic order of `F` and `J`.
-        pub sh_order: u32,
-        /// Kernel radius `h`; `None`: automatic.
-        pub kernel_radius: Option<f32>,
-        /// Uniform fraction `u` of the placement density.
-        pub uniform_mix: f32,
-        /// What the path-length clock counts.
-        pub clock: ClockKind,
-        /// Internal-light samples per camera sample.
-        pub light_samples: u32,
-    }
-
-    impl Default for InternalSettings {
-        fn default() -> Self {
-            Self {
-                s_star: None,
-                lights: 4096,
-                terms: 16,
-                walks: 64,
-                sh_order: 3,
-                kernel_radius: None,
-                uniform_mix: 0.0,
-                clock: ClockKind::OpticalDepth,
-                light_samples: 2,
-            }
-        }
-    }
-}
+pub use crate::scene::{ClockKind, InternalSettings};
 
 /// Which estimator a stream of passes uses, as the UI sees it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Estimator {
     /// Multiple scatter as internal lights.
-    Internal,
+    Internal = 0,
     /// The unbiased path tracer.
-    Reference,
+    Reference = 1,
 }
 
 /// Whether this build has the internal-lights renderer.
-pub const HAS_INTERNAL: bool = false;
+pub const HAS_INTERNAL: bool = true;
 
 /// Everything that determines the picture.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Job {
-    /// The scene; its camera's width and height are the render size.
+    /// The scene (with the internal-lights settings); its camera's width
+    /// and height are the render size.
     pub scene: Scene,
-    /// The internal-lights settings.
-    pub internal: InternalSettings,
     /// Folder that grid paths are relative to.
     pub scene_dir: PathBuf,
     /// One stream per estimator to show (two for the comparisons).
@@ -113,22 +58,95 @@ pub struct Job {
 }
 
 /// The internal lights as the gizmos need them.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct LightsView {
-    /// World positions.
-    pub positions: Vec<Vec3>,
-    /// Density `ρ` at each light.
-    pub density: Vec<f32>,
-    /// Volume weight `V_i` of each light.
-    pub weight: Vec<f32>,
-    /// Mean of `F_i` over directions (RGB).
+    lights: Arc<InternalLights>,
+    /// Extinction per unit density (largest channel), for the reach.
+    sigma_max: f32,
+    /// Mean of `F_i` over directions (RGB), per light.
     pub mean_f: Vec<Vec3>,
-    /// Mean of `J_i` over directions (RGB).
+    /// Mean of `J_i` over directions (RGB), per light.
     pub mean_j: Vec<Vec3>,
-    /// The window length `s*` in world units.
-    pub s_star: f32,
+}
+
+impl LightsView {
+    fn new(lights: Arc<InternalLights>, scene: &Scene) -> Self {
+        let n = lights.lights.len();
+        Self {
+            mean_f: (0..n).map(|i| lights.mean_f(i)).collect(),
+            mean_j: (0..n).map(|i| lights.mean_j(i)).collect(),
+            sigma_max: scene.medium.sigma_t.max_element() * scene.medium.density_scale,
+            lights,
+        }
+    }
+
+    /// Number of lights.
+    pub fn len(&self) -> usize {
+        self.lights.lights.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.lights.lights.is_empty()
+    }
+
+    /// Position `x_i`.
+    pub fn position(&self, i: usize) -> Vec3 {
+        self.lights.lights[i].position
+    }
+
+    /// Density `ρ(x_i)`.
+    pub fn density(&self, i: usize) -> f32 {
+        self.lights.lights[i].density
+    }
+
+    /// Volume weight `V_i`.
+    pub fn weight(&self, i: usize) -> f32 {
+        self.lights.lights[i].weight
+    }
+
+    /// `F_i` and `J_i` towards direction `dir` (the direction light
+    /// travels), RGB.
+    pub fn lobe(&self, i: usize, dir: Vec3) -> (Vec3, Vec3) {
+        (self.lights.eval_f(i, dir), self.lights.eval_j(i, dir))
+    }
+
+    /// The window `s*` in the clock's units.
+    pub fn s_star(&self) -> f32 {
+        self.lights.s_star
+    }
+
+    /// Whether `s*` counts optical depth (mean free paths).
+    pub fn optical_clock(&self) -> bool {
+        matches!(self.lights.params.clock, Clock::OpticalDepth)
+    }
+
+    /// The reach `s*` around light `i` in world units: exact for the
+    /// geometric clock; for the optical-depth clock, `s*` mean free paths
+    /// at the light's own density (an indication: the clock runs faster
+    /// in denser parts).
+    pub fn reach(&self, i: usize) -> f32 {
+        if self.optical_clock() {
+            let c = self.sigma_max * self.density(i);
+            if c > 0.0 {
+                self.lights.s_star / c
+            } else {
+                f32::INFINITY
+            }
+        } else {
+            self.lights.s_star
+        }
+    }
+
+    /// The kernel radius `h` in use.
+    pub fn kernel_radius(&self) -> f32 {
+        self.lights.kernel_radius
+    }
+
     /// Energy carried by each series term `k = 0..N`.
-    pub term_energy: Vec<Vec3>,
+    pub fn term_energy(&self) -> &[Vec3] {
+        &self.lights.term_energy
+    }
 }
 
 /// The image of one estimator so far.
@@ -153,7 +171,7 @@ pub struct StreamImage {
 }
 
 /// What the worker last produced for a job.
-#[derive(Clone, Debug)]
+#[derive(Clone)]
 pub struct Snapshot {
     /// Which submission this belongs to (see [`Worker::submit`]).
     pub generation: u64,
@@ -161,6 +179,9 @@ pub struct Snapshot {
     pub streams: Vec<StreamImage>,
     /// The internal lights, when the internal method runs.
     pub lights: Option<Arc<LightsView>>,
+    /// The full-resolution internal-lights renderer, for the per-pixel
+    /// light shares.
+    pub shares: Option<Arc<Renderer>>,
     /// Whether every stream reached `max_spp`.
     pub done: bool,
     /// The medium's world box.
@@ -250,6 +271,17 @@ impl Worker {
     }
 }
 
+impl Snapshot {
+    /// The internal lights that light render pixel (`x`, `y`), with their
+    /// shares (summing to one), largest first.
+    pub fn light_shares(&self, x: u32, y: u32) -> Vec<(usize, f32)> {
+        self.shares
+            .as_ref()
+            .map(|r| r.light_shares(x, y))
+            .unwrap_or_default()
+    }
+}
+
 impl Drop for Worker {
     fn drop(&mut self) {
         self.cancel.store(true, Ordering::Relaxed);
@@ -282,8 +314,8 @@ struct DensityCache {
 }
 
 impl DensityCache {
-    fn get(&mut self, scene: &Scene, dir: &PathBuf) -> Result<Density, String> {
-        let key = (scene.medium.density.clone(), dir.clone());
+    fn get(&mut self, scene: &Scene, dir: &Path) -> Result<Density, String> {
+        let key = (scene.medium.density.clone(), dir.to_path_buf());
         if self.key.as_ref() != Some(&key) || self.density.is_none() {
             let density = scene.load_density(dir).map_err(|e| format!("{e:#}"))?;
             self.key = Some(key);
@@ -293,39 +325,33 @@ impl DensityCache {
     }
 }
 
-/// A renderer for one estimator: the adapter over `cpu`.
-struct Engine {
-    prepared: Arc<Prepared>,
-    estimator: Estimator,
-    seed: u64,
+/// The internal lights of the last job: they depend on the medium, the
+/// external lights, the method's settings and the seed, not on the camera,
+/// so orbiting or resizing reuses them.
+#[derive(Default)]
+struct LightsCache {
+    key: Option<(Scene, PathBuf)>,
+    lights: Option<Arc<InternalLights>>,
 }
 
-impl Engine {
-    fn build(prepared: Arc<Prepared>, estimator: Estimator, job: &Job) -> Engine {
-        Engine {
-            prepared,
-            estimator,
-            seed: job.scene.render.seed,
-        }
+impl LightsCache {
+    fn key_of(job: &Job) -> (Scene, PathBuf) {
+        let mut scene = job.scene.clone();
+        scene.camera = crate::scene::Camera::default();
+        scene.render.spp = 0;
+        scene.render.method = Method::Internal;
+        (scene, job.scene_dir.clone())
     }
+}
 
-    /// One sample per pixel; `None` if cancelled.
-    fn pass(&self, pass: u32, cancel: &AtomicBool) -> Option<Vec<Vec3>> {
-        if cancel.load(Ordering::Relaxed) {
-            return None;
-        }
-        let method = match self.estimator {
-            // Until the internal-lights renderer lands, both streams run the
-            // reference so that the rest of the previewer can be exercised.
-            Estimator::Internal | Estimator::Reference => Method::Reference,
-        };
-        let out = crate::cpu::render_pass(&self.prepared, method, self.seed, pass);
-        (!cancel.load(Ordering::Relaxed)).then_some(out)
-    }
-
-    fn lights(&self) -> Option<LightsView> {
-        None
-    }
+/// The settings of one stream: the job's, with its estimator.
+fn settings_for(job: &Job, estimator: Estimator) -> crate::scene::RenderSettings {
+    let mut settings = job.scene.render.clone();
+    settings.method = match estimator {
+        Estimator::Internal => Method::Internal,
+        Estimator::Reference => Method::Reference,
+    };
+    settings
 }
 
 /// Target duration of the low-resolution first pass.
@@ -336,9 +362,10 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>) {
         key: None,
         density: None,
     };
-    // Seconds per full-resolution pixel-sample, measured; guides the
-    // preview's downscale factor.
-    let mut secs_per_sample: f64 = 2e-6;
+    let mut lights_cache = LightsCache::default();
+    // Seconds per full-resolution pixel-sample, measured per estimator;
+    // guides the preview's downscale factor.
+    let mut secs_per_sample = [2e-6f64; 2];
     let mut next: Option<Command> = None;
     loop {
         let command = match next.take() {
@@ -361,134 +388,221 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>) {
             next = Some(c);
             continue;
         }
-        next = run_job(
+        let mut ctx = JobContext {
             generation,
-            &job,
-            &cancel,
-            &rx,
-            &shared,
-            &mut cache,
-            &mut secs_per_sample,
-        );
+            job: &job,
+            cancel: &cancel,
+            rx: &rx,
+            shared: &shared,
+            secs_per_sample: &mut secs_per_sample,
+        };
+        next = ctx.run(&mut cache, &mut lights_cache);
     }
 }
 
-/// Renders `job` until it is done or replaced; returns the command that
-/// replaced it, if any.
-fn run_job(
+/// One job being rendered.
+struct JobContext<'a> {
     generation: u64,
-    job: &Job,
-    cancel: &AtomicBool,
-    rx: &Receiver<Command>,
-    shared: &Shared,
-    cache: &mut DensityCache,
-    secs_per_sample: &mut f64,
-) -> Option<Command> {
-    let density = match cache.get(&job.scene, &job.scene_dir) {
-        Ok(d) => d,
-        Err(e) => {
-            push_error(shared, e);
-            return rx.recv().ok();
-        }
-    };
-    if let Ok(c) = rx.try_recv() {
-        return Some(c);
-    }
-    let (width, height) = (job.scene.camera.width, job.scene.camera.height);
+    job: &'a Job,
+    cancel: &'a AtomicBool,
+    rx: &'a Receiver<Command>,
+    shared: &'a Shared,
+    secs_per_sample: &'a mut [f64; 2],
+}
 
-    // Low-resolution first look.
-    let full_samples = width as f64 * height as f64 * job.estimators.len() as f64;
-    let expected = full_samples * *secs_per_sample;
-    let factor = (expected / PREVIEW_BUDGET.as_secs_f64())
-        .sqrt()
-        .ceil()
-        .clamp(1.0, 16.0) as u32;
-    if factor > 1 {
-        let mut small = job.scene.clone();
-        small.camera.width = (width / factor).max(1);
-        small.camera.height = (height / factor).max(1);
-        let prepared = Arc::new(Prepared::with_density(small.clone(), density.clone()));
-        let mut streams = Vec::new();
-        for &estimator in &job.estimators {
-            let engine = Engine::build(prepared.clone(), estimator, job);
-            let Some(mean) = engine.pass(0, cancel) else {
-                return rx.recv().ok();
-            };
-            streams.push(StreamImage {
-                estimator,
-                width: small.camera.width,
-                height: small.camera.height,
-                spp: 0,
-                mean,
-                rel_error: 1.0,
-                single: None,
-                internal: None,
-            });
-        }
+impl JobContext<'_> {
+    /// What to do when the job was cancelled or failed: wait for the next.
+    fn next_command(&self) -> Option<Command> {
+        self.rx.recv().ok()
+    }
+
+    /// A newer command, if one is waiting.
+    fn newer(&self) -> Option<Command> {
+        self.rx.try_recv().ok()
+    }
+
+    fn publish(&self, streams: Vec<StreamImage>, extra: SnapshotExtra) {
         publish(
-            shared,
+            self.shared,
             Snapshot {
-                generation,
+                generation: self.generation,
                 streams,
-                lights: None,
-                done: false,
-                bounds: Some(density.bounds()),
+                lights: extra.lights,
+                shares: extra.shares,
+                done: extra.done,
+                bounds: extra.bounds,
             },
         );
-        if let Ok(c) = rx.try_recv() {
-            return Some(c);
-        }
     }
 
-    let bounds = Some(density.bounds());
-    let prepared = Arc::new(Prepared::with_density(job.scene.clone(), density));
-    let engines: Vec<Engine> = job
-        .estimators
-        .iter()
-        .map(|&e| Engine::build(prepared.clone(), e, job))
-        .collect();
-    let lights = engines.iter().find_map(|e| e.lights()).map(Arc::new);
-    let mut films: Vec<Film> = engines.iter().map(|_| Film::new(width, height)).collect();
-    for pass in 0..job.max_spp {
-        for (engine, film) in engines.iter().zip(films.iter_mut()) {
-            let start = Instant::now();
-            let Some(samples) = engine.pass(pass, cancel) else {
-                return rx.recv().ok();
-            };
-            let secs = start.elapsed().as_secs_f64();
-            *secs_per_sample = secs / (width as f64 * height as f64).max(1.0);
-            film.add_pass(&samples);
+    /// Renders the job until it is done or replaced; returns the command
+    /// that replaced it, if any.
+    fn run(&mut self, cache: &mut DensityCache, lights_cache: &mut LightsCache) -> Option<Command> {
+        let job = self.job;
+        let density = match cache.get(&job.scene, &job.scene_dir) {
+            Ok(d) => d,
+            Err(e) => {
+                push_error(self.shared, e);
+                return self.next_command();
+            }
+        };
+        if let Some(c) = self.newer() {
+            return Some(c);
         }
-        let streams = engines
+        let bounds = Some(density.bounds());
+        let (width, height) = (job.scene.camera.width, job.scene.camera.height);
+        let prepared = Arc::new(Prepared::with_density(job.scene.clone(), density.clone()));
+
+        // The internal lights, from the cache when only the camera changed.
+        let wants_internal = job.estimators.contains(&Estimator::Internal);
+        let key = LightsCache::key_of(job);
+        let lights = if !wants_internal {
+            None
+        } else if lights_cache.key.as_ref() == Some(&key) && lights_cache.lights.is_some() {
+            lights_cache.lights.clone()
+        } else {
+            let settings = settings_for(job, Estimator::Internal);
+            let Some(renderer) = Renderer::new(prepared.clone(), &settings, self.cancel) else {
+                return self.next_command();
+            };
+            let built = renderer.internal_lights_arc().cloned();
+            lights_cache.key = Some(key);
+            lights_cache.lights = built.clone();
+            built
+        };
+        let engines: Vec<(Estimator, Arc<Renderer>)> = job
+            .estimators
             .iter()
-            .zip(&films)
-            .map(|(e, f)| stream_image(e.estimator, f))
+            .map(|&e| {
+                let settings = settings_for(job, e);
+                let cached = if e == Estimator::Internal {
+                    lights.clone()
+                } else {
+                    None
+                };
+                (
+                    e,
+                    Arc::new(Renderer::with_lights(prepared.clone(), &settings, cached)),
+                )
+            })
             .collect();
-        publish(
-            shared,
-            Snapshot {
-                generation,
-                streams,
-                lights: lights.clone(),
-                done: pass + 1 == job.max_spp,
-                bounds,
-            },
-        );
-        if let Ok(c) = rx.try_recv() {
+        let lights_view = lights
+            .clone()
+            .map(|l| Arc::new(LightsView::new(l, &job.scene)));
+        let shares = engines
+            .iter()
+            .find(|(e, _)| *e == Estimator::Internal)
+            .map(|(_, r)| r.clone());
+        if let Some(c) = self.newer() {
             return Some(c);
         }
-    }
-    // Done: wait for the next job.
-    loop {
-        match rx.recv_timeout(Duration::from_secs(3600)) {
-            Ok(c) => return Some(c),
-            Err(RecvTimeoutError::Timeout) => continue,
-            Err(RecvTimeoutError::Disconnected) => return None,
+
+        // Low-resolution first look.
+        let expected: f64 = job
+            .estimators
+            .iter()
+            .map(|&e| width as f64 * height as f64 * self.secs_per_sample[e as usize])
+            .sum();
+        let factor = (expected / PREVIEW_BUDGET.as_secs_f64())
+            .sqrt()
+            .ceil()
+            .clamp(1.0, 16.0) as u32;
+        if factor > 1 {
+            let mut small = job.scene.clone();
+            small.camera.width = (width / factor).max(1);
+            small.camera.height = (height / factor).max(1);
+            let prepared_small = Arc::new(Prepared::with_density(small.clone(), density));
+            let mut streams = Vec::new();
+            for &estimator in &job.estimators {
+                let settings = settings_for(job, estimator);
+                let cached = if estimator == Estimator::Internal {
+                    lights.clone()
+                } else {
+                    None
+                };
+                let renderer = Renderer::with_lights(prepared_small.clone(), &settings, cached);
+                let Some(pass) = renderer.pass(0, self.cancel) else {
+                    return self.next_command();
+                };
+                streams.push(StreamImage {
+                    estimator,
+                    width: small.camera.width,
+                    height: small.camera.height,
+                    spp: 0,
+                    mean: pass.total,
+                    rel_error: 1.0,
+                    single: None,
+                    internal: None,
+                });
+            }
+            self.publish(
+                streams,
+                SnapshotExtra {
+                    lights: lights_view.clone(),
+                    shares: None,
+                    done: false,
+                    bounds,
+                },
+            );
+            if let Some(c) = self.newer() {
+                return Some(c);
+            }
+        }
+
+        let film = || Film::new(width, height);
+        let mut films: Vec<[Film; 3]> = engines.iter().map(|_| [film(), film(), film()]).collect();
+        for pass in 0..job.max_spp {
+            for ((estimator, engine), film) in engines.iter().zip(films.iter_mut()) {
+                let start = Instant::now();
+                let Some(image) = engine.pass(pass, self.cancel) else {
+                    return self.next_command();
+                };
+                let secs = start.elapsed().as_secs_f64();
+                self.secs_per_sample[*estimator as usize] =
+                    secs / (width as f64 * height as f64).max(1.0);
+                film[0].add_pass(&image.total);
+                film[1].add_pass(&image.single);
+                film[2].add_pass(&image.internal);
+            }
+            let streams = engines
+                .iter()
+                .zip(&films)
+                .map(|((e, _), f)| stream_image(*e, f))
+                .collect();
+            self.publish(
+                streams,
+                SnapshotExtra {
+                    lights: lights_view.clone(),
+                    shares: shares.clone(),
+                    done: pass + 1 == job.max_spp,
+                    bounds,
+                },
+            );
+            if let Some(c) = self.newer() {
+                return Some(c);
+            }
+        }
+        // Done: wait for the next job.
+        loop {
+            match self.rx.recv_timeout(Duration::from_secs(3600)) {
+                Ok(c) => return Some(c),
+                Err(RecvTimeoutError::Timeout) => continue,
+                Err(RecvTimeoutError::Disconnected) => return None,
+            }
         }
     }
 }
 
-fn stream_image(estimator: Estimator, film: &Film) -> StreamImage {
+/// The parts of a snapshot besides the images.
+struct SnapshotExtra {
+    lights: Option<Arc<LightsView>>,
+    shares: Option<Arc<Renderer>>,
+    done: bool,
+    bounds: Option<(Vec3, Vec3)>,
+}
+
+fn stream_image(estimator: Estimator, films: &[Film; 3]) -> StreamImage {
+    let film = &films[0];
     let mean = film.mean();
     let variance = film.variance_of_mean();
     let luminance = |v: Vec3| v.dot(Vec3::new(0.2126, 0.7152, 0.0722));
@@ -507,7 +621,7 @@ fn stream_image(estimator: Estimator, film: &Film) -> StreamImage {
         spp: film.samples,
         mean,
         rel_error,
-        single: None,
-        internal: None,
+        single: Some(films[1].mean()),
+        internal: Some(films[2].mean()),
     }
 }

@@ -13,7 +13,7 @@ use glam::Vec3;
 use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
 use super::backend::{ClockKind, HAS_INTERNAL};
 use crate::render::tonemap::ViewTransform;
-use crate::scene::Light;
+use crate::scene::{Light, Method};
 
 /// Label of the window-length slider (tests find widgets by label).
 pub const S_STAR: &str = "s* (window)";
@@ -90,7 +90,7 @@ fn optional_log_ui(
 }
 
 fn method_knobs_ui(ui: &mut Ui, app: &mut LanternApp) {
-    let internal = &mut app.doc.internal;
+    let internal = &mut app.doc.scene.render.internal;
     optional_log_ui(
         ui,
         S_STAR,
@@ -187,7 +187,7 @@ fn medium_ui(ui: &mut Ui, app: &mut LanternApp) {
 }
 
 fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
-    let s = &mut app.doc.internal;
+    let s = &mut app.doc.scene.render.internal;
     ui.add(
         Slider::new(&mut s.walks, 1..=4096)
             .logarithmic(true)
@@ -368,8 +368,18 @@ fn render_ui(ui: &mut Ui, app: &mut LanternApp) {
                  own noise is included and shrinks as it refines).",
             ),
         ] {
-            ui.selectable_value(&mut session.compare, mode, name)
-                .on_hover_text(tip);
+            if ui
+                .selectable_value(&mut session.compare, mode, name)
+                .on_hover_text(tip)
+                .clicked()
+            {
+                // The scene's own method follows the single-image modes.
+                match mode {
+                    CompareMode::Internal => app.doc.scene.render.method = Method::Internal,
+                    CompareMode::Reference => app.doc.scene.render.method = Method::Reference,
+                    _ => {}
+                }
+            }
         }
     });
     ui.add(Slider::new(&mut session.res_scale, 0.1..=1.0).text("resolution scale"))
@@ -458,7 +468,7 @@ fn terms_plot_ui(ui: &mut Ui, app: &mut LanternApp) {
         return;
     };
     let bars: Vec<Bar> = lights
-        .term_energy
+        .term_energy()
         .iter()
         .enumerate()
         .map(|(k, e)| Bar::new(k as f64, e.dot(Vec3::splat(1.0 / 3.0)) as f64))

@@ -309,7 +309,7 @@ pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), 
 
 /// The render settings written into an EXR header.
 pub fn render_metadata(app: &LanternApp) -> Vec<(String, String)> {
-    let i = &app.doc.internal;
+    let i = &app.doc.scene.render.internal;
     let s = &app.doc.scene;
     vec![
         (

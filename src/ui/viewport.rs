@@ -208,11 +208,15 @@ pub enum NavAction {
     Sun,
 }
 
-/// Camera navigation state.
+/// Camera navigation and picking state.
 #[derive(Clone, Debug, Default)]
 pub struct NavState {
     /// The action of the drag in progress.
     pub dragging: Option<NavAction>,
+    /// The light shares of the pixel under the cursor…
+    pub shares: Vec<(usize, f32)>,
+    /// …for this (generation, x, y).
+    pub shares_key: Option<(u64, u32, u32)>,
 }
 
 /// The world box of the medium as far as the scene says (grids without
@@ -269,12 +273,16 @@ pub fn viewport_ui(ui: &mut Ui, app: &mut LanternApp) {
     let response = ui.allocate_rect(rect, Sense::click_and_drag());
     let ppp = ui.ctx().pixels_per_point();
     let scale = app.session.res_scale.clamp(0.05, 1.0);
-    app.render_size = [
+    app.render_size = app.forced_render_size.unwrap_or([
         ((rect.width() * ppp * scale).round() as u32).clamp(8, 8192),
         ((rect.height() * ppp * scale).round() as u32).clamp(8, 8192),
-    ];
+    ]);
     let painter = ui.painter_at(rect);
     painter.rect_filled(rect, 0.0, Color32::from_gray(16));
+    // The image keeps its aspect (a scripted render size may differ from
+    // the viewport's); everything below maps to this rectangle.
+    let outer = rect;
+    let rect = fit_rect(outer, app.render_aspect());
 
     let full_uv = Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0));
     if let Some(t) = &app.display.texture {
@@ -313,15 +321,26 @@ pub fn viewport_ui(ui: &mut Ui, app: &mut LanternApp) {
     }
     split_divider_ui(ui, app, rect);
     let sun_handle = if app.session.show_sun {
-        bounds.and_then(|b| sun_gizmo(&painter, app, b, &to_screen))
+        sun_gizmo(&painter, app, rect, &frame, bounds, &to_screen)
     } else {
         None
     };
     if app.session.show_lights {
-        lights_gizmos_ui(ui, app, rect, &to_screen);
+        lights_gizmos_ui(ui, app, rect, &frame, &to_screen);
     }
     navigate(ui, app, &response, rect, &frame, bounds, sun_handle);
-    overlay_ui(&painter, app, rect);
+    overlay_ui(&painter, app, outer);
+}
+
+/// The largest rectangle of width/height `aspect` centred in `outer`.
+fn fit_rect(outer: Rect, aspect: f32) -> Rect {
+    let aspect = aspect.max(1e-3);
+    let size = if outer.width() / outer.height().max(1.0) > aspect {
+        Vec2::new(outer.height() * aspect, outer.height())
+    } else {
+        Vec2::new(outer.width(), outer.width() / aspect)
+    };
+    Rect::from_center_size(outer.center(), size)
 }
 
 fn draw_box(painter: &egui::Painter, lo: Vec3, hi: Vec3, to_screen: &dyn Fn(Vec3) -> Option<Pos2>) {
@@ -345,43 +364,107 @@ fn draw_box(painter: &egui::Painter, lo: Vec3, hi: Vec3, to_screen: &dyn Fn(Vec3
     }
 }
 
-/// World position of the sun handle: on a sphere around the box, on the
-/// side the sun shines from.
-fn sun_handle_world(direction: Vec3, bounds: (Vec3, Vec3)) -> (Vec3, Vec3, f32) {
-    let center = 0.5 * (bounds.0 + bounds.1);
-    let radius = 0.6 * (bounds.1 - bounds.0).length().max(1e-3);
+/// The sun gizmo's globe: a disc in the image's lower-left corner that
+/// stands for the sphere of directions seen from the camera; the sun's dot
+/// sits where the sun is (hollow when it is behind the medium).
+fn sun_globe(rect: Rect) -> (Pos2, f32) {
+    let radius = (0.09 * rect.height()).clamp(28.0, 60.0);
     (
-        center - direction.normalize_or_zero() * radius,
-        center,
+        Pos2::new(rect.left() + radius + 14.0, rect.bottom() - radius - 14.0),
         radius,
+    )
+}
+
+/// The unit direction the first sun shines from.
+fn sun_from(lights: &[Light]) -> Option<Vec3> {
+    lights.iter().find_map(|l| match l {
+        Light::Sun { direction, .. } => Some((-*direction).normalize_or_zero()),
+        _ => None,
+    })
+}
+
+/// Camera axes: right, up, and towards the viewer.
+fn camera_axes(frame: &CameraFrame) -> (Vec3, Vec3, Vec3) {
+    (
+        frame.right_scaled.normalize_or_zero(),
+        frame.up_scaled.normalize_or_zero(),
+        -frame.forward,
     )
 }
 
 fn sun_gizmo(
     painter: &egui::Painter,
     app: &LanternApp,
-    bounds: (Vec3, Vec3),
+    rect: Rect,
+    frame: &CameraFrame,
+    bounds: Option<(Vec3, Vec3)>,
     to_screen: &dyn Fn(Vec3) -> Option<Pos2>,
 ) -> Option<Pos2> {
-    let direction = app.doc.scene.lights.iter().find_map(|l| match l {
-        Light::Sun { direction, .. } => Some(*direction),
-        _ => None,
-    })?;
-    let (handle, center, _) = sun_handle_world(direction, bounds);
-    let p = to_screen(handle)?;
+    let from = sun_from(&app.doc.scene.lights)?;
     let yellow = Color32::from_rgb(255, 210, 60);
-    if let Some(c) = to_screen(center) {
-        // The direction light travels: from the handle towards the medium.
-        let d = (c - p).normalized() * 28.0;
-        painter.arrow(p, d, Stroke::new(2.0, yellow));
+    // A 3D arrow through the medium's centre: the way the light travels.
+    if let Some((lo, hi)) = bounds {
+        let center = 0.5 * (lo + hi);
+        let length = 0.35 * (hi - lo).length();
+        if let (Some(a), Some(b)) = (to_screen(center + from * length), to_screen(center)) {
+            painter.arrow(a, b - a, Stroke::new(1.5, yellow.gamma_multiply(0.7)));
+        }
     }
-    painter.circle(p, 7.0, yellow, Stroke::new(1.5, Color32::BLACK));
-    for k in 0..8 {
-        let a = k as f32 * std::f32::consts::TAU / 8.0;
-        let v = Vec2::new(a.cos(), a.sin());
-        painter.line_segment([p + v * 9.0, p + v * 13.0], Stroke::new(1.5, yellow));
+    let (c, r) = sun_globe(rect);
+    let (right, up, toward) = camera_axes(frame);
+    painter.circle(
+        c,
+        r,
+        Color32::from_black_alpha(120),
+        Stroke::new(1.0, Color32::from_gray(140)),
+    );
+    painter.line_segment(
+        [c - Vec2::X * r, c + Vec2::X * r],
+        Stroke::new(0.5, Color32::from_gray(90)),
+    );
+    painter.line_segment(
+        [c - Vec2::Y * r, c + Vec2::Y * r],
+        Stroke::new(0.5, Color32::from_gray(90)),
+    );
+    let p = c + Vec2::new(from.dot(right), -from.dot(up)) * r;
+    if from.dot(toward) >= 0.0 {
+        painter.circle(p, 6.0, yellow, Stroke::new(1.0, Color32::BLACK));
+    } else {
+        painter.circle_stroke(p, 6.0, Stroke::new(2.0, yellow));
     }
+    painter.text(
+        c + Vec2::new(0.0, r + 2.0),
+        egui::Align2::CENTER_TOP,
+        "sun",
+        egui::FontId::proportional(11.0),
+        Color32::from_gray(200),
+    );
     Some(p)
+}
+
+/// Moves the first sun so that its dot sits under `pos` on the globe,
+/// keeping it on the same side (in front of or behind the medium).
+fn drag_sun(lights: &mut [Light], frame: &CameraFrame, rect: Rect, pos: Pos2) {
+    let Some(old_from) = sun_from(lights) else {
+        return;
+    };
+    let (c, r) = sun_globe(rect);
+    let (right, up, toward) = camera_axes(frame);
+    let mut v = Vec2::new(pos.x - c.x, c.y - pos.y) / r;
+    if v.length() > 1.0 {
+        v = v.normalized();
+    }
+    let z = (1.0 - v.length_sq()).max(0.0).sqrt();
+    let z = if old_from.dot(toward) >= 0.0 { z } else { -z };
+    let from = (right * v.x + up * v.y + toward * z).normalize_or_zero();
+    if from == Vec3::ZERO {
+        return;
+    }
+    if let Some(Light::Sun { direction, .. }) =
+        lights.iter_mut().find(|l| matches!(l, Light::Sun { .. }))
+    {
+        *direction = -from;
+    }
 }
 
 fn split_divider_ui(ui: &mut Ui, app: &mut LanternApp, rect: Rect) {
@@ -424,14 +507,18 @@ fn split_divider_ui(ui: &mut Ui, app: &mut LanternApp, rect: Rect) {
 
 fn lights_gizmos_ui(
     ui: &mut Ui,
-    app: &LanternApp,
+    app: &mut LanternApp,
     rect: Rect,
+    frame: &CameraFrame,
     to_screen: &dyn Fn(Vec3) -> Option<Pos2>,
 ) {
-    let Some(lights) = app.display.lights() else {
+    let Some(snapshot) = app.display.snapshot() else {
         return;
     };
-    let n = lights.positions.len();
+    let Some(lights) = snapshot.lights.clone() else {
+        return;
+    };
+    let n = lights.len();
     if n == 0 {
         return;
     }
@@ -440,29 +527,49 @@ fn lights_gizmos_ui(
         LightQuantity::J => lights.mean_j[i],
     };
     let power: Vec<f32> = (0..n)
-        .map(|i| quantity(i).element_sum() / 3.0 * lights.weight[i])
+        .map(|i| quantity(i).element_sum() / 3.0 * lights.weight(i))
         .collect();
     let max = power.iter().copied().fold(0.0f32, f32::max).max(1e-30);
+    let log = app.session.log_strength;
     let norm = |p: f32| {
-        if app.session.log_strength {
+        if log {
             // Three decades below the strongest light map onto [0, 1].
             ((p / max).max(1e-3).log10() + 3.0) / 3.0
         } else {
             p / max
         }
     };
-    // Draw at most a few thousand (evenly strided) to stay interactive.
-    let stride = n.div_ceil(4096).max(1);
     let painter = ui.painter_at(rect);
     let hover = ui.ctx().pointer_hover_pos().filter(|p| rect.contains(*p));
+
+    // Which lights to draw: all (strided to a few thousand), or those that
+    // light the pixel under the cursor, with their shares.
+    let shares: Option<Vec<(usize, f32)>> = if app.session.contributors_only {
+        hover.map(|h| {
+            let x = ((h.x - rect.left()) / rect.width() * frame.width as f32) as u32;
+            let y = ((h.y - rect.top()) / rect.height() * frame.height as f32) as u32;
+            let key = (snapshot.generation, x, y);
+            if app.nav.shares_key != Some(key) {
+                app.nav.shares = snapshot.light_shares(x, y);
+                app.nav.shares_key = Some(key);
+            }
+            app.nav.shares.clone()
+        })
+    } else {
+        None
+    };
+    let indices: Vec<usize> = match &shares {
+        Some(list) => list.iter().map(|(i, _)| *i).filter(|&i| i < n).collect(),
+        None => (0..n).step_by(n.div_ceil(4096).max(1)).collect(),
+    };
     let mut nearest: Option<(usize, Pos2, f32)> = None;
-    for i in (0..n).step_by(stride) {
-        let Some(p) = to_screen(lights.positions[i]) else {
+    for &i in &indices {
+        let Some(p) = to_screen(lights.position(i)) else {
             continue;
         };
         let t = norm(power[i]);
-        let radius = 1.5 + 5.0 * t;
-        painter.circle_filled(p, radius, heat(0.25 + 0.75 * t));
+        // Small and translucent, so that the image stays readable.
+        painter.circle_filled(p, 1.0 + 3.5 * t, heat(0.25 + 0.75 * t).gamma_multiply(0.75));
         if let Some(h) = hover {
             let d = h.distance(p);
             if d < 8.0 && nearest.is_none_or(|(_, _, best)| d < best) {
@@ -470,31 +577,121 @@ fn lights_gizmos_ui(
             }
         }
     }
+    if let Some(list) = &shares {
+        // Label the largest shares next to their lights.
+        for (i, share) in list.iter().take(12) {
+            if let Some(p) = to_screen(lights.position(*i)) {
+                painter.circle_stroke(
+                    p,
+                    3.0 + 12.0 * share.sqrt(),
+                    Stroke::new(1.0, Color32::WHITE),
+                );
+                painter.text(
+                    p + Vec2::new(8.0, -8.0),
+                    egui::Align2::LEFT_BOTTOM,
+                    format!("{:.0} %", share * 100.0),
+                    egui::FontId::proportional(11.0),
+                    Color32::WHITE,
+                );
+            }
+        }
+        if let Some(h) = hover {
+            painter.text(
+                h + Vec2::new(14.0, 14.0),
+                egui::Align2::LEFT_TOP,
+                format!("{} lights light this pixel", list.len()),
+                egui::FontId::proportional(12.0),
+                Color32::WHITE,
+            );
+        }
+    }
     if let Some((i, p, _)) = nearest {
         painter.circle_stroke(p, 9.0, Stroke::new(1.5, Color32::WHITE));
-        let f = lights.mean_f[i];
-        let j = lights.mean_j[i];
-        let pos = lights.positions[i];
-        egui::Tooltip::always_open(
-            ui.ctx().clone(),
-            ui.layer_id(),
-            ui.scope_id().with("light_tip"),
-            egui::PopupAnchor::Pointer,
-        )
-        .show(|ui: &mut Ui| {
-            ui.label(format!("internal light {i}"));
-            ui.label(format!(
-                "position ({:.3}, {:.3}, {:.3})",
-                pos.x, pos.y, pos.z
-            ));
-            ui.label(format!(
-                "ρ {:.4}   V {:.4e}",
-                lights.density[i], lights.weight[i]
-            ));
-            ui.label(format!("F ({:.3e}, {:.3e}, {:.3e})", f.x, f.y, f.z));
-            ui.label(format!("J ({:.3e}, {:.3e}, {:.3e})", j.x, j.y, j.z));
-        });
+        // The reach s* around the light.
+        let depth = (lights.position(i) - frame.eye).dot(frame.forward);
+        let focal = 0.5 * rect.height() / frame.up_scaled.length().max(1e-6);
+        let reach = lights.reach(i);
+        if depth > 0.0 && reach.is_finite() {
+            let radius = reach * focal / depth;
+            painter.circle_stroke(
+                p,
+                radius.min(4.0 * rect.width()),
+                Stroke::new(1.0, Color32::from_rgba_unmultiplied(255, 220, 120, 160)),
+            );
+        }
+        light_tooltip(ui, &lights, i, frame);
     }
+}
+
+/// Position, ρ, V, F and J of light `i`, and a polar glyph of its lobes in
+/// the image plane.
+fn light_tooltip(ui: &Ui, lights: &LightsView, i: usize, frame: &CameraFrame) {
+    let f = lights.mean_f[i];
+    let j = lights.mean_j[i];
+    let pos = lights.position(i);
+    let right = frame.right_scaled.normalize_or_zero();
+    let up = frame.up_scaled.normalize_or_zero();
+    egui::Tooltip::always_open(
+        ui.ctx().clone(),
+        ui.layer_id(),
+        ui.scope_id().with("light_tip"),
+        egui::PopupAnchor::Pointer,
+    )
+    .show(|ui: &mut Ui| {
+        ui.label(egui::RichText::new(format!("internal light {i}")).strong());
+        ui.label(format!(
+            "position ({:.3}, {:.3}, {:.3})",
+            pos.x, pos.y, pos.z
+        ));
+        ui.label(format!(
+            "ρ {:.4}   V {:.4e}",
+            lights.density(i),
+            lights.weight(i)
+        ));
+        ui.label(format!("F ({:.3e}, {:.3e}, {:.3e})", f.x, f.y, f.z));
+        ui.label(format!("J ({:.3e}, {:.3e}, {:.3e})", j.x, j.y, j.z));
+        let unit = if lights.optical_clock() { " mfp" } else { "" };
+        ui.label(format!(
+            "reach s* {:.3}{unit} (≈ {:.3} world)",
+            lights.s_star(),
+            lights.reach(i)
+        ));
+        // The lobes: radiance leaving the light in each direction of the
+        // image plane (J white, F orange), normalised to the largest.
+        let size = 120.0;
+        let (response, painter) = ui.allocate_painter(Vec2::splat(size), Sense::hover());
+        let c = response.rect.center();
+        const STEPS: usize = 72;
+        let samples: Vec<(Vec2, f32, f32)> = (0..STEPS)
+            .map(|k| {
+                let a = k as f32 / STEPS as f32 * std::f32::consts::TAU;
+                let dir = right * a.cos() + up * a.sin();
+                let (f, j) = lights.lobe(i, dir);
+                let lum = |v: Vec3| (v.element_sum() / 3.0).max(0.0);
+                (Vec2::new(a.cos(), -a.sin()), lum(f), lum(j))
+            })
+            .collect();
+        let max = samples
+            .iter()
+            .map(|s| s.1.max(s.2))
+            .fold(0.0f32, f32::max)
+            .max(1e-30);
+        painter.circle_stroke(c, 0.45 * size, Stroke::new(0.5, Color32::from_gray(80)));
+        for (pick, colour) in [
+            (1usize, Color32::from_rgb(255, 160, 60)),
+            (2, Color32::WHITE),
+        ] {
+            let points: Vec<Pos2> = samples
+                .iter()
+                .map(|s| {
+                    let v = if pick == 1 { s.1 } else { s.2 };
+                    c + s.0 * (0.45 * size * v / max)
+                })
+                .collect();
+            painter.add(egui::Shape::closed_line(points, Stroke::new(1.5, colour)));
+        }
+        ui.label(egui::RichText::new("lobes in the image plane: J white, F orange").small());
+    });
 }
 
 /// Camera and sun dragging, wheel zoom and the F key.
@@ -535,10 +732,8 @@ fn navigate(
         Some(NavAction::Pan) => pan(cam, delta, rect.height()),
         Some(NavAction::Zoom) => zoom(cam, (delta.x - delta.y) * 0.01),
         Some(NavAction::Sun) => {
-            if let (Some(pos), Some(b)) = (response.interact_pointer_pos(), bounds) {
-                let px = (pos.x - rect.left()) / rect.width() * frame.width as f32;
-                let py = (pos.y - rect.top()) / rect.height() * frame.height as f32;
-                drag_sun(&mut app.doc.scene.lights, frame, px, py, b);
+            if let Some(pos) = response.interact_pointer_pos() {
+                drag_sun(&mut app.doc.scene.lights, frame, rect, pos);
             }
         }
         None => {}
@@ -587,31 +782,6 @@ pub fn zoom(cam: &mut Camera, amount: f32) {
     let scaled = offset * (-amount).exp();
     if scaled.length() > 1e-3 {
         cam.eye = cam.target + scaled;
-    }
-}
-
-/// Points the first sun so that its handle sits under render pixel
-/// (`px`, `py`).
-fn drag_sun(lights: &mut [Light], frame: &CameraFrame, px: f32, py: f32, b: (Vec3, Vec3)) {
-    let Some(Light::Sun { direction, .. }) =
-        lights.iter_mut().find(|l| matches!(l, Light::Sun { .. }))
-    else {
-        return;
-    };
-    let (_, center, radius) = sun_handle_world(*direction, b);
-    let ray = frame.ray_dir(px, py);
-    let oc = frame.eye - center;
-    // Nearest hit of the ray with the handle sphere, or the closest point.
-    let bq = oc.dot(ray);
-    let disc = bq * bq - (oc.length_squared() - radius * radius);
-    let point = if disc >= 0.0 {
-        frame.eye + ray * (-bq - disc.sqrt())
-    } else {
-        frame.eye + ray * (-bq)
-    };
-    let from = (point - center).normalize_or_zero();
-    if from != Vec3::ZERO {
-        *direction = -from;
     }
 }
 
