@@ -147,6 +147,9 @@ pub struct Script {
     pub timeout: Duration,
     /// Render at exactly this size instead of the viewport's.
     pub render_size: Option<[u32; 2]>,
+    /// Measure the UI's frame rate for this many seconds while the render
+    /// thread re-samples the lights and refines, then quit.
+    pub fps_secs: f32,
     /// What the viewport shows (`LANTERN_VIEW`: internal, reference, split
     /// or error); default: the scene's method.
     pub compare: Option<CompareMode>,
@@ -162,7 +165,10 @@ impl Script {
         let latency_changes = var("LANTERN_LATENCY_CHANGES")
             .and_then(|v| v.parse().ok())
             .unwrap_or(0);
-        if screenshot.is_none() && latency_changes == 0 {
+        let fps_secs = var("LANTERN_FPS_SECS")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0.0);
+        if screenshot.is_none() && latency_changes == 0 && fps_secs <= 0.0 {
             return None;
         }
         Some(Script {
@@ -176,6 +182,7 @@ impl Script {
                     .and_then(|v| v.parse().ok())
                     .unwrap_or(300),
             ),
+            fps_secs,
             compare: var("LANTERN_VIEW").and_then(|v| match v.as_str() {
                 "internal" => Some(CompareMode::Internal),
                 "reference" => Some(CompareMode::Reference),
@@ -282,6 +289,9 @@ struct ScriptState {
     changes_done: u32,
     last_change: Option<Instant>,
     screenshot: Option<Receiver<std::sync::Arc<egui::ColorImage>>>,
+    reported: bool,
+    frames: Vec<Instant>,
+    ui_ms: Vec<f64>,
 }
 
 /// The previewer application.
@@ -521,6 +531,7 @@ impl LanternApp {
 
     /// Draws the whole application into `ui` (one frame).
     pub fn ui(&mut self, ui: &mut egui::Ui) {
+        let frame_start = Instant::now();
         let ctx = ui.ctx().clone();
         for e in self.worker.take_errors() {
             self.notify_error(e);
@@ -555,6 +566,11 @@ impl LanternApp {
         self.toasts_ui(&ctx);
         self.close_ui(&ctx);
         self.script_step(&ctx);
+        if self.script.is_some() {
+            self.script_state
+                .ui_ms
+                .push(frame_start.elapsed().as_secs_f64() * 1e3);
+        }
     }
 
     fn poll_load(&mut self) {
@@ -722,12 +738,39 @@ impl LanternApp {
         let current = self.display.generation() == generation && generation > 0;
         let state = &mut self.script_state;
         let started = *state.started.get_or_insert_with(Instant::now);
-        ctx.request_repaint();
+        // Poll gently: a software rasterizer (CI) shares the CPU with the
+        // render thread, and the worker wakes the UI on every new image.
+        ctx.request_repaint_after(Duration::from_millis(100));
         if started.elapsed() > script.timeout {
             eprintln!("lantern: scripted run timed out");
             std::process::exit(3);
         }
         let spp = self.display.spp();
+
+        if script.fps_secs > 0.0 {
+            if state.frames.is_empty() {
+                if !current {
+                    return;
+                }
+                // Start with a change, so the lights re-sample meanwhile.
+                let g = &mut self.doc.scene.medium.g;
+                *g = if *g > 0.5 { 0.3 } else { 0.7 };
+            }
+            state.frames.push(Instant::now());
+            ctx.request_repaint();
+            let first = state.frames[0];
+            if first.elapsed().as_secs_f32() >= script.fps_secs {
+                println!("{}", fps_report(&state.frames));
+                let mut ui_ms = state.ui_ms.clone();
+                ui_ms.sort_by(f64::total_cmp);
+                println!(
+                    "lantern: time in LanternApp::ui: median {:.1} ms",
+                    ui_ms.get(ui_ms.len() / 2).copied().unwrap_or(f64::NAN)
+                );
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            }
+            return;
+        }
 
         if state.changes_done < script.latency_changes {
             // Change g once the previous change has been shown and the image
@@ -750,10 +793,11 @@ impl LanternApp {
             }
             return;
         }
-        if script.latency_changes > 0 && !state.screenshot_requested {
+        if script.latency_changes > 0 && !state.reported {
             if self.change_at.is_some() {
                 return;
             }
+            state.reported = true;
             // Drop the start-up image's latency (it includes the density bake).
             let samples = self.latency_ms.clone();
             println!("{}", latency_report(&samples, self.render_size));
@@ -789,6 +833,32 @@ impl LanternApp {
             }
         }
     }
+}
+
+/// One line with the frame rate over the frame times `frames`.
+pub fn fps_report(frames: &[Instant]) -> String {
+    let mut gaps: Vec<f64> = frames
+        .windows(2)
+        .map(|w| (w[1] - w[0]).as_secs_f64() * 1e3)
+        .collect();
+    gaps.sort_by(f64::total_cmp);
+    let at = |q: f64| {
+        gaps.get(((gaps.len() as f64 - 1.0) * q).round() as usize)
+            .copied()
+            .unwrap_or(f64::NAN)
+    };
+    let total = frames
+        .last()
+        .zip(frames.first())
+        .map_or(0.0, |(b, a)| (*b - *a).as_secs_f64());
+    format!(
+        "lantern: UI while rendering: {:.1} frames/s over {:.1} s; frame interval median {:.1} ms, 95th percentile {:.1} ms, max {:.1} ms",
+        gaps.len() as f64 / total.max(1e-9),
+        total,
+        at(0.5),
+        at(0.95),
+        at(1.0)
+    )
 }
 
 /// One line with the median and spread of measured latencies.

@@ -226,7 +226,10 @@ impl Worker {
         let worker_shared = shared.clone();
         let thread = std::thread::Builder::new()
             .name("lantern-render".into())
-            .spawn(move || worker_loop(rx, worker_shared))
+            .spawn(move || {
+                super::lower_thread_priority();
+                worker_loop(rx, worker_shared)
+            })
             .ok();
         if thread.is_none() {
             push_error(&shared, "cannot start the render thread".into());
@@ -355,7 +358,7 @@ fn settings_for(job: &Job, estimator: Estimator) -> crate::scene::RenderSettings
 }
 
 /// Target duration of the low-resolution first pass.
-const PREVIEW_BUDGET: Duration = Duration::from_millis(35);
+const PREVIEW_BUDGET: Duration = Duration::from_millis(20);
 
 fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>) {
     let mut cache = DensityCache {
@@ -451,23 +454,64 @@ impl JobContext<'_> {
         }
         let bounds = Some(density.bounds());
         let (width, height) = (job.scene.camera.width, job.scene.camera.height);
+        let t0 = Instant::now();
         let prepared = Arc::new(Prepared::with_density(job.scene.clone(), density.clone()));
+        trace("prepare", t0);
 
         // The internal lights, from the cache when only the camera changed.
+        // Otherwise a coarse set (few lights, few walks) is built first, so
+        // that a first image appears at once while the full set builds.
         let wants_internal = job.estimators.contains(&Estimator::Internal);
         let key = LightsCache::key_of(job);
-        let lights = if !wants_internal {
-            None
-        } else if lights_cache.key.as_ref() == Some(&key) && lights_cache.lights.is_some() {
+        let cached = if lights_cache.key.as_ref() == Some(&key) {
             lights_cache.lights.clone()
         } else {
+            None
+        };
+        let mut preview = PreviewInput {
+            density: &density,
+            bounds,
+        };
+        let lights = if !wants_internal {
+            if let Some(c) = self.preview(&mut preview, None) {
+                return Some(c);
+            }
+            None
+        } else if let Some(lights) = cached {
+            if let Some(c) = self.preview(&mut preview, Some(lights.clone())) {
+                return Some(c);
+            }
+            Some(lights)
+        } else {
             let settings = settings_for(job, Estimator::Internal);
+            let mut coarse_settings = settings.clone();
+            coarse_settings.internal.lights = settings.internal.lights.min(COARSE_LIGHTS);
+            coarse_settings.internal.walks = settings.internal.walks.min(COARSE_WALKS);
+            let is_coarse = coarse_settings != settings;
+            if is_coarse {
+                let t = Instant::now();
+                let Some(coarse) = Renderer::new(prepared.clone(), &coarse_settings, self.cancel)
+                else {
+                    return self.next_command();
+                };
+                trace("coarse lights", t);
+                if let Some(c) = self.preview(&mut preview, coarse.internal_lights_arc().cloned()) {
+                    return Some(c);
+                }
+            }
+            let t = Instant::now();
             let Some(renderer) = Renderer::new(prepared.clone(), &settings, self.cancel) else {
                 return self.next_command();
             };
+            trace("lights", t);
             let built = renderer.internal_lights_arc().cloned();
             lights_cache.key = Some(key);
             lights_cache.lights = built.clone();
+            if !is_coarse {
+                if let Some(c) = self.preview(&mut preview, built.clone()) {
+                    return Some(c);
+                }
+            }
             built
         };
         let engines: Vec<(Estimator, Arc<Renderer>)> = job
@@ -495,58 +539,6 @@ impl JobContext<'_> {
             .map(|(_, r)| r.clone());
         if let Some(c) = self.newer() {
             return Some(c);
-        }
-
-        // Low-resolution first look.
-        let expected: f64 = job
-            .estimators
-            .iter()
-            .map(|&e| width as f64 * height as f64 * self.secs_per_sample[e as usize])
-            .sum();
-        let factor = (expected / PREVIEW_BUDGET.as_secs_f64())
-            .sqrt()
-            .ceil()
-            .clamp(1.0, 16.0) as u32;
-        if factor > 1 {
-            let mut small = job.scene.clone();
-            small.camera.width = (width / factor).max(1);
-            small.camera.height = (height / factor).max(1);
-            let prepared_small = Arc::new(Prepared::with_density(small.clone(), density));
-            let mut streams = Vec::new();
-            for &estimator in &job.estimators {
-                let settings = settings_for(job, estimator);
-                let cached = if estimator == Estimator::Internal {
-                    lights.clone()
-                } else {
-                    None
-                };
-                let renderer = Renderer::with_lights(prepared_small.clone(), &settings, cached);
-                let Some(pass) = renderer.pass(0, self.cancel) else {
-                    return self.next_command();
-                };
-                streams.push(StreamImage {
-                    estimator,
-                    width: small.camera.width,
-                    height: small.camera.height,
-                    spp: 0,
-                    mean: pass.total,
-                    rel_error: 1.0,
-                    single: None,
-                    internal: None,
-                });
-            }
-            self.publish(
-                streams,
-                SnapshotExtra {
-                    lights: lights_view.clone(),
-                    shares: None,
-                    done: false,
-                    bounds,
-                },
-            );
-            if let Some(c) = self.newer() {
-                return Some(c);
-            }
         }
 
         let film = || Film::new(width, height);
@@ -590,6 +582,93 @@ impl JobContext<'_> {
                 Err(RecvTimeoutError::Disconnected) => return None,
             }
         }
+    }
+}
+
+/// What the low-resolution first look needs.
+struct PreviewInput<'a> {
+    density: &'a Density,
+    bounds: Option<(Vec3, Vec3)>,
+}
+
+/// Lights of the coarse set built before the full one.
+const COARSE_LIGHTS: u32 = 128;
+/// Walks per light of the coarse set.
+const COARSE_WALKS: u32 = 4;
+
+/// Prints the duration of a worker stage when `LANTERN_TRACE` is set.
+fn trace(stage: &str, since: Instant) {
+    if std::env::var_os("LANTERN_TRACE").is_some() {
+        eprintln!(
+            "lantern: {stage} {:.1} ms",
+            since.elapsed().as_secs_f64() * 1e3
+        );
+    }
+}
+
+impl JobContext<'_> {
+    /// Renders and publishes one pass at a reduced resolution chosen so that
+    /// it takes about [`PREVIEW_BUDGET`]; returns a newer command if one
+    /// arrived (or the wait after a cancellation).
+    fn preview(
+        &mut self,
+        input: &mut PreviewInput<'_>,
+        lights: Option<Arc<InternalLights>>,
+    ) -> Option<Command> {
+        let job = self.job;
+        let (width, height) = (job.scene.camera.width, job.scene.camera.height);
+        let expected: f64 = job
+            .estimators
+            .iter()
+            .map(|&e| width as f64 * height as f64 * self.secs_per_sample[e as usize])
+            .sum();
+        let factor = (expected / PREVIEW_BUDGET.as_secs_f64())
+            .sqrt()
+            .ceil()
+            .clamp(1.0, 16.0) as u32;
+        if factor <= 1 {
+            return None;
+        }
+        let t = Instant::now();
+        let mut small = job.scene.clone();
+        small.camera.width = (width / factor).max(1);
+        small.camera.height = (height / factor).max(1);
+        let prepared_small = Arc::new(Prepared::with_density(small.clone(), input.density.clone()));
+        let mut streams = Vec::new();
+        for &estimator in &job.estimators {
+            let settings = settings_for(job, estimator);
+            let cached = if estimator == Estimator::Internal {
+                lights.clone()
+            } else {
+                None
+            };
+            let renderer = Renderer::with_lights(prepared_small.clone(), &settings, cached);
+            let Some(pass) = renderer.pass(0, self.cancel) else {
+                return self.next_command();
+            };
+            streams.push(StreamImage {
+                estimator,
+                width: small.camera.width,
+                height: small.camera.height,
+                spp: 0,
+                mean: pass.total,
+                rel_error: 1.0,
+                single: None,
+                internal: None,
+            });
+        }
+        let view = lights.map(|l| Arc::new(LightsView::new(l, &job.scene)));
+        self.publish(
+            streams,
+            SnapshotExtra {
+                lights: view,
+                shares: None,
+                done: false,
+                bounds: input.bounds,
+            },
+        );
+        trace("preview", t);
+        self.newer()
     }
 }
 

@@ -30,8 +30,33 @@ pub struct LaunchOptions {
     pub script: Option<app::Script>,
 }
 
+/// How much lower (in nice steps) the render threads run than the UI.
+const RENDER_NICE_STEPS: i32 = 8;
+
+/// Lowers the calling thread's scheduling priority (Linux: the nice value
+/// is per thread), so that rendering yields the CPU to the UI thread.
+pub fn lower_thread_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: plain system calls on the calling thread's own id, with no
+    // pointers involved; failure only leaves the priority as it was.
+    unsafe {
+        let steps = std::env::var("LANTERN_RENDER_NICE")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(RENDER_NICE_STEPS);
+        let tid = libc::gettid() as libc::id_t;
+        let current = libc::getpriority(libc::PRIO_PROCESS, tid);
+        let _ = libc::setpriority(libc::PRIO_PROCESS, tid, (current + steps).min(19));
+    }
+}
+
 /// Opens the previewer window and runs until it is closed.
 pub fn run(options: LaunchOptions) -> anyhow::Result<()> {
+    // Rendering runs on rayon's global pool: its threads run below the UI.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .thread_name(|i| format!("lantern-pass-{i}"))
+        .start_handler(|_| lower_thread_priority())
+        .build_global();
     let native = eframe::NativeOptions {
         viewport: eframe::egui::ViewportBuilder::default()
             .with_title("Lantern")
