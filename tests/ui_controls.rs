@@ -7,6 +7,9 @@ use std::time::{Duration, Instant};
 use eframe::egui;
 use egui_kittest::kittest::{NodeT, Queryable};
 use egui_kittest::Harness;
+use lantern::scene::Method;
+use lantern::ui::app::CompareMode;
+use lantern::ui::backend::Estimator;
 use lantern::ui::controls;
 use lantern::ui::LanternApp;
 
@@ -145,4 +148,40 @@ fn a_bad_scene_file_keeps_the_current_scene_and_says_why() {
         .find(|t| t.error)
         .expect("an error notification");
     assert!(toast.text.contains("broken.ron"), "{}", toast.text);
+}
+
+#[test]
+fn split_and_error_views_render_both_estimators_and_show_the_rmse() {
+    let mut h = harness();
+    h.state_mut().doc.scene.render.internal.lights = 256;
+    h.state_mut().doc.scene.render.internal.walks = 8;
+    h.run_steps(3);
+    h.get_by_label("Split").click();
+    h.run_steps(2);
+    assert_eq!(h.state().session.compare, CompareMode::Split);
+    let job = h.state().job();
+    assert_eq!(
+        job.estimators,
+        vec![Estimator::Internal, Estimator::Reference]
+    );
+    wait_for_image(&mut h);
+
+    h.get_by_label("Error").click();
+    h.run_steps(2);
+    assert_eq!(h.state().session.compare, CompareMode::Error);
+    // The display re-derives the heatmap from the same streams.
+    let start = Instant::now();
+    while h.state().display.rmse.is_none() {
+        assert!(start.elapsed() < Duration::from_secs(120), "no RMSE");
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let rmse = h.state().display.rmse.unwrap_or(f32::NAN);
+    assert!(rmse.is_finite() && rmse >= 0.0, "rmse {rmse}");
+
+    // Choosing a single method also sets the scene's method.
+    h.get_by_label("Reference").click();
+    h.run_steps(2);
+    assert_eq!(h.state().doc.scene.render.method, Method::Reference);
+    assert_eq!(h.state().job().estimators, vec![Estimator::Reference]);
 }

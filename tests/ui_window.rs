@@ -1,11 +1,12 @@
 //! The real previewer window (eframe + wgpu) under a display server: it
 //! opens the example cloud, renders a few passes, saves a screenshot of
 //! itself and quits; the screenshot must show the side panel and a rendered
-//! cloud. The same command makes the README's screenshot:
+//! cloud in the split view (internal lights | reference). The same command
+//! makes the README's screenshot:
 //!
 //! ```text
-//! LANTERN_SCREENSHOT=docs/previewer.png LANTERN_SCRIPT_SPP=16 \
-//!     xvfb-run -a -s "-screen 0 1280x820x24" cargo run --release -- view assets/scenes/cloud.ron
+//! LANTERN_KEEP_SCREENSHOT=assets/previewer.png \
+//!     xvfb-run -a -s "-screen 0 1280x820x24" cargo test --test ui_window
 //! ```
 //!
 //! Without a display the test prints a notice and passes, unless
@@ -39,9 +40,9 @@ fn the_window_renders_and_screenshots_itself() {
         .arg("view")
         .arg(&scene)
         .env("LANTERN_SCREENSHOT", &shot)
-        .env("LANTERN_SCRIPT_SPP", "4")
+        .env("LANTERN_SCRIPT_SPP", "8")
         .env("LANTERN_SCRIPT_TIMEOUT_SECS", "240")
-        .env("LANTERN_RENDER_SIZE", "192x192")
+        .env("LANTERN_VIEW", "split")
         // Keep the user's session file out of it.
         .env("XDG_DATA_HOME", dir.path())
         .output()

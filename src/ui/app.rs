@@ -109,6 +109,8 @@ pub struct Session {
     pub show_box: bool,
     /// Draw the sun gizmo.
     pub show_sun: bool,
+    /// EXR export adds the single-scatter and internal-light layers.
+    pub export_layers: bool,
 }
 
 impl Default for Session {
@@ -129,6 +131,7 @@ impl Default for Session {
             contributors_only: false,
             show_box: true,
             show_sun: true,
+            export_layers: true,
         }
     }
 }
@@ -292,6 +295,7 @@ struct ScriptState {
     reported: bool,
     frames: Vec<Instant>,
     ui_ms: Vec<f64>,
+    cpu_ms: Vec<f64>,
 }
 
 /// The previewer application.
@@ -328,6 +332,11 @@ pub struct LanternApp {
     change_at: Option<(u64, Instant)>,
     /// Slider-to-image latencies measured, in milliseconds.
     pub latency_ms: Vec<f64>,
+    /// The same, until the frame that shows the image has been presented
+    /// (measured at the start of the next frame).
+    pub presented_ms: Vec<f64>,
+    /// The change whose image is in the frame being presented.
+    presenting: Option<Instant>,
     /// Whether the close dialog is open.
     confirm_close: bool,
     /// Whether closing was confirmed.
@@ -388,6 +397,8 @@ impl LanternApp {
             forced_render_size: None,
             change_at: None,
             latency_ms: Vec::new(),
+            presented_ms: Vec::new(),
+            presenting: None,
             confirm_close: false,
             close_confirmed: false,
             script: None,
@@ -532,6 +543,9 @@ impl LanternApp {
     /// Draws the whole application into `ui` (one frame).
     pub fn ui(&mut self, ui: &mut egui::Ui) {
         let frame_start = Instant::now();
+        if let Some(at) = self.presenting.take() {
+            self.presented_ms.push(at.elapsed().as_secs_f64() * 1e3);
+        }
         let ctx = ui.ctx().clone();
         for e in self.worker.take_errors() {
             self.notify_error(e);
@@ -559,6 +573,8 @@ impl LanternApp {
                     if generation >= g {
                         self.latency_ms.push(at.elapsed().as_secs_f64() * 1e3);
                         self.change_at = None;
+                        self.presenting = Some(at);
+                        ctx.request_repaint();
                     }
                 }
             }
@@ -761,11 +777,15 @@ impl LanternApp {
             let first = state.frames[0];
             if first.elapsed().as_secs_f32() >= script.fps_secs {
                 println!("{}", fps_report(&state.frames));
-                let mut ui_ms = state.ui_ms.clone();
-                ui_ms.sort_by(f64::total_cmp);
+                let median = |v: &[f64]| {
+                    let mut v = v.to_vec();
+                    v.sort_by(f64::total_cmp);
+                    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+                };
                 println!(
-                    "lantern: time in LanternApp::ui: median {:.1} ms",
-                    ui_ms.get(ui_ms.len() / 2).copied().unwrap_or(f64::NAN)
+                    "lantern: per frame: {:.1} ms in LanternApp::ui, {:.1} ms eframe frame time without vsync waits (medians)",
+                    median(&state.ui_ms),
+                    median(&state.cpu_ms)
                 );
                 ctx.send_viewport_cmd(egui::ViewportCommand::Close);
             }
@@ -777,6 +797,7 @@ impl LanternApp {
             // has been refining for a moment (the change then cancels a
             // pass in flight, as a person's would).
             let ready = self.change_at.is_none()
+                && self.presenting.is_none()
                 && current
                 && state
                     .last_change
@@ -789,18 +810,32 @@ impl LanternApp {
                 if state.changes_done == 1 {
                     // The first one after start-up measures nothing useful.
                     self.latency_ms.clear();
+                    self.presented_ms.clear();
                 }
             }
             return;
         }
         if script.latency_changes > 0 && !state.reported {
-            if self.change_at.is_some() {
+            if self.change_at.is_some() || self.presenting.is_some() {
                 return;
             }
             state.reported = true;
-            // Drop the start-up image's latency (it includes the density bake).
-            let samples = self.latency_ms.clone();
-            println!("{}", latency_report(&samples, self.render_size));
+            println!(
+                "{}",
+                latency_report(
+                    &self.latency_ms,
+                    self.render_size,
+                    "to the frame that shows it"
+                )
+            );
+            println!(
+                "{}",
+                latency_report(
+                    &self.presented_ms,
+                    self.render_size,
+                    "until that frame is presented"
+                )
+            );
             if script.screenshot.is_none() {
                 ctx.send_viewport_cmd(egui::ViewportCommand::Close);
                 return;
@@ -862,7 +897,7 @@ pub fn fps_report(frames: &[Instant]) -> String {
 }
 
 /// One line with the median and spread of measured latencies.
-pub fn latency_report(samples_ms: &[f64], size: [u32; 2]) -> String {
+pub fn latency_report(samples_ms: &[f64], size: [u32; 2], what: &str) -> String {
     let mut s = samples_ms.to_vec();
     s.sort_by(f64::total_cmp);
     let median = if s.is_empty() {
@@ -873,7 +908,7 @@ pub fn latency_report(samples_ms: &[f64], size: [u32; 2]) -> String {
         0.5 * (s[s.len() / 2 - 1] + s[s.len() / 2])
     };
     format!(
-        "lantern: slider-to-image latency at {}x{}: median {:.1} ms over {} changes (min {:.1}, max {:.1})",
+        "lantern: slider-to-image latency at {}x{}, {what}: median {:.1} ms over {} changes (min {:.1}, max {:.1})",
         size[0],
         size[1],
         median,
@@ -884,7 +919,12 @@ pub fn latency_report(samples_ms: &[f64], size: [u32; 2]) -> String {
 }
 
 impl eframe::App for LanternApp {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        if self.script.is_some() {
+            if let Some(secs) = frame.info().cpu_usage {
+                self.script_state.cpu_ms.push(secs as f64 * 1e3);
+            }
+        }
         LanternApp::ui(self, ui);
     }
 

@@ -200,6 +200,7 @@ enum Command {
         generation: u64,
         job: Box<Job>,
         cancel: Arc<AtomicBool>,
+        sent: Instant,
     },
     Quit,
 }
@@ -252,6 +253,7 @@ impl Worker {
             generation: self.generation,
             job: Box::new(job),
             cancel: self.cancel.clone(),
+            sent: Instant::now(),
         });
         if sent.is_err() {
             push_error(&self.shared, "the render thread has stopped".into());
@@ -384,7 +386,11 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>) {
                 generation,
                 job,
                 cancel,
-            } => (generation, job, cancel),
+                sent,
+            } => {
+                trace("queued", sent);
+                (generation, job, cancel)
+            }
         };
         // Skip to the newest job if several queued up.
         if let Ok(c) = rx.try_recv() {

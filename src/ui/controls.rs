@@ -453,11 +453,15 @@ fn view_ui(ui: &mut Ui, app: &mut LanternApp) {
         "Shows only the internal lights that contribute to the pixel under the \
              cursor, with their shares.",
     );
-    if !app.latency_ms.is_empty() {
+    if !app.presented_ms.is_empty() {
         ui.label(
-            egui::RichText::new(super::app::latency_report(&app.latency_ms, app.render_size))
-                .small()
-                .weak(),
+            egui::RichText::new(
+                super::app::latency_report(&app.presented_ms, app.render_size, "on screen")
+                    .trim_start_matches("lantern: ")
+                    .to_string(),
+            )
+            .small()
+            .weak(),
         );
     }
 }

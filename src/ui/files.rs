@@ -164,15 +164,6 @@ pub fn save_dialog(app: &mut LanternApp, save_as: bool) {
     }
 }
 
-/// Which layers an EXR export carries besides the beauty image.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct ExportLayers {
-    /// The single-scatter part.
-    pub single: bool,
-    /// The internal-light part.
-    pub internal: bool,
-}
-
 /// The File menu.
 pub fn file_menu_ui(ui: &mut egui::Ui, app: &mut LanternApp) {
     if ui.button("Open…").clicked() {
@@ -211,6 +202,10 @@ pub fn file_menu_ui(ui: &mut egui::Ui, app: &mut LanternApp) {
         }
     });
     ui.separator();
+    ui.checkbox(
+        &mut app.session.export_layers,
+        "EXR: add single-scatter and internal-light layers",
+    );
     if ui.button("Export EXR (linear, float)…").clicked() {
         ui.close();
         export_dialog(app, "exr");
@@ -274,11 +269,13 @@ pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), 
                 },
             ));
             let mut layers: Vec<(&str, &[Vec3])> = Vec::new();
-            if let Some(single) = &stream.single {
-                layers.push(("single", single));
-            }
-            if let Some(internal) = &stream.internal {
-                layers.push(("internal", internal));
+            if app.session.export_layers {
+                if let Some(single) = &stream.single {
+                    layers.push(("single", single));
+                }
+                if let Some(internal) = &stream.internal {
+                    layers.push(("internal", internal));
+                }
             }
             write_exr_with_metadata(
                 path,
@@ -357,22 +354,27 @@ pub fn write_exr_with_metadata(
     for (name, pixels) in layers {
         add(name, pixels);
     }
-    let size = (width as usize, height as usize);
-    let layer = Layer::new(
-        size,
-        LayerAttributes::default(),
-        Encoding::SMALL_LOSSLESS,
-        AnyChannels::sort(channels.into()),
-    );
-    let mut image = Image::from_layer(layer);
     let mut other = HashMap::new();
     for (k, v) in metadata {
         let key = Text::new_or_none(k).ok_or_else(|| fail(&format!("bad key {k}")))?;
         let value = Text::new_or_none(v).ok_or_else(|| fail(&format!("bad value {v}")))?;
         other.insert(key, AttributeValue::Text(value));
     }
-    image.attributes.other = other;
-    image.write().to_file(path).map_err(|e| fail(&e))
+    let attributes = LayerAttributes {
+        other,
+        ..LayerAttributes::default()
+    };
+    let size = (width as usize, height as usize);
+    let layer = Layer::new(
+        size,
+        attributes,
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(channels.into()),
+    );
+    Image::from_layer(layer)
+        .write()
+        .to_file(path)
+        .map_err(|e| fail(&e))
 }
 
 /// Saves a screenshot of the window as PNG.

@@ -66,6 +66,7 @@ pub fn run(options: LaunchOptions) -> anyhow::Result<()> {
         persist_window: options.script.is_none(),
         ..Default::default()
     };
+
     eframe::run_native(
         "Lantern",
         native,

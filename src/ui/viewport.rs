@@ -505,6 +505,10 @@ fn split_divider_ui(ui: &mut Ui, app: &mut LanternApp, rect: Rect) {
     label_at(x + 8.0, "reference", egui::Align2::LEFT_TOP);
 }
 
+/// Most internal lights drawn at once (evenly strided beyond): enough to
+/// show where they are, few enough to leave the image readable.
+const MAX_DRAWN_LIGHTS: usize = 1500;
+
 fn lights_gizmos_ui(
     ui: &mut Ui,
     app: &mut LanternApp,
@@ -560,7 +564,9 @@ fn lights_gizmos_ui(
     };
     let indices: Vec<usize> = match &shares {
         Some(list) => list.iter().map(|(i, _)| *i).filter(|&i| i < n).collect(),
-        None => (0..n).step_by(n.div_ceil(4096).max(1)).collect(),
+        None => (0..n)
+            .step_by(n.div_ceil(MAX_DRAWN_LIGHTS).max(1))
+            .collect(),
     };
     let mut nearest: Option<(usize, Pos2, f32)> = None;
     for &i in &indices {
@@ -569,7 +575,7 @@ fn lights_gizmos_ui(
         };
         let t = norm(power[i]);
         // Small and translucent, so that the image stays readable.
-        painter.circle_filled(p, 1.0 + 3.5 * t, heat(0.25 + 0.75 * t).gamma_multiply(0.75));
+        painter.circle_filled(p, 1.0 + 3.5 * t, heat(0.25 + 0.75 * t).gamma_multiply(0.6));
         if let Some(h) = hover {
             let d = h.distance(p);
             if d < 8.0 && nearest.is_none_or(|(_, _, best)| d < best) {
@@ -671,16 +677,21 @@ fn light_tooltip(ui: &Ui, lights: &LightsView, i: usize, frame: &CameraFrame) {
                 (Vec2::new(a.cos(), -a.sin()), lum(f), lum(j))
             })
             .collect();
-        let max = samples
-            .iter()
-            .map(|s| s.1.max(s.2))
-            .fold(0.0f32, f32::max)
-            .max(1e-30);
+        // Each lobe is normalised to its own peak: the glyph shows shapes
+        // (F is typically far weaker than J); the numbers above give sizes.
+        let peak = |pick: usize| {
+            samples
+                .iter()
+                .map(|s| if pick == 1 { s.1 } else { s.2 })
+                .fold(0.0f32, f32::max)
+                .max(1e-30)
+        };
         painter.circle_stroke(c, 0.45 * size, Stroke::new(0.5, Color32::from_gray(80)));
         for (pick, colour) in [
             (1usize, Color32::from_rgb(255, 160, 60)),
             (2, Color32::WHITE),
         ] {
+            let max = peak(pick);
             let points: Vec<Pos2> = samples
                 .iter()
                 .map(|s| {
@@ -690,7 +701,12 @@ fn light_tooltip(ui: &Ui, lights: &LightsView, i: usize, frame: &CameraFrame) {
                 .collect();
             painter.add(egui::Shape::closed_line(points, Stroke::new(1.5, colour)));
         }
-        ui.label(egui::RichText::new("lobes in the image plane: J white, F orange").small());
+        ui.label(
+            egui::RichText::new(
+                "lobe shapes in the image plane (each to its peak): J white, F orange",
+            )
+            .small(),
+        );
     });
 }
 
