@@ -185,3 +185,63 @@ fn split_and_error_views_render_both_estimators_and_show_the_rmse() {
     assert_eq!(h.state().doc.scene.render.method, Method::Reference);
     assert_eq!(h.state().job().estimators, vec![Estimator::Reference]);
 }
+
+#[test]
+fn a_dropped_volume_replaces_the_medium_and_is_framed() {
+    let mut h = harness();
+    h.run_steps(2);
+    let vol = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/volumes/puffs.vol");
+    let eye_before = h.state().doc.scene.camera.eye;
+    h.state_mut().open_now(&vol);
+    h.run_steps(2);
+    let app = h.state();
+    match &app.doc.scene.medium.density {
+        lantern::scene::DensitySource::Grid(g) => {
+            assert_eq!(g.path, std::path::PathBuf::from("puffs.vol"))
+        }
+        other => panic!("medium not replaced: {other:?}"),
+    }
+    assert!(app.is_dirty(), "a volume makes a new, unsaved scene");
+    assert_ne!(app.doc.scene.camera.eye, eye_before, "not framed");
+    assert!(app.toasts.iter().all(|t| !t.error));
+    wait_for_image(&mut h);
+}
+
+#[test]
+fn the_series_term_plot_appears_with_the_internal_lights() {
+    let mut h = harness();
+    h.run_steps(1);
+    h.get_by_label("Series terms").click();
+    h.run_steps(2);
+    assert!(h
+        .query_by_label_contains("appears once internal lights are sampled")
+        .is_some());
+    h.get_by_label("Series terms").click();
+    h.state_mut().doc.scene.render.internal.lights = 256;
+    h.state_mut().doc.scene.render.internal.walks = 8;
+    h.state_mut().doc.scene.render.internal.terms = 6;
+    h.state_mut().session.compare = CompareMode::Internal;
+    h.run_steps(2);
+    let start = Instant::now();
+    loop {
+        h.step();
+        let lights = h.state().display.lights();
+        // The full set (not the coarse preview set) carries N + 1 terms.
+        if lights.as_ref().is_some_and(|l| l.len() == 256) {
+            let energy = lights.map(|l| l.term_energy().len()).unwrap_or(0);
+            assert_eq!(energy, 7, "terms k = 0..=N");
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no internal lights"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    h.get_by_label("Series terms").click();
+    h.run_steps(2);
+    // With lights, the section shows the plot instead of its placeholder.
+    assert!(h
+        .query_by_label_contains("appears once internal lights are sampled")
+        .is_none());
+}

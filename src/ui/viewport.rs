@@ -278,11 +278,15 @@ pub fn viewport_ui(ui: &mut Ui, app: &mut LanternApp) {
         ((rect.height() * ppp * scale).round() as u32).clamp(8, 8192),
     ]);
     let painter = ui.painter_at(rect);
-    painter.rect_filled(rect, 0.0, Color32::from_gray(16));
     // The image keeps its aspect (a scripted render size may differ from
     // the viewport's); everything below maps to this rectangle.
     let outer = rect;
     let rect = fit_rect(outer, app.render_aspect());
+    // Only the margins need a background: every covered pixel costs a
+    // software rasterizer time on each frame.
+    if app.display.snapshot().is_none() || (rect.size() - outer.size()).length() > 1.0 {
+        painter.rect_filled(outer, 0.0, Color32::from_gray(16));
+    }
 
     let full_uv = Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0));
     if let Some(t) = &app.display.texture {
