@@ -19,7 +19,6 @@ fn harness() -> Harness<'static, LanternApp> {
     app.session.res_scale = 0.1;
     Harness::builder()
         .with_size([1200.0, 800.0])
-        .with_accessibility_check(false)
         .build_ui_state(|ui, app: &mut LanternApp| app.ui(ui), app)
 }
 
@@ -244,4 +243,52 @@ fn the_series_term_plot_appears_with_the_internal_lights() {
     assert!(h
         .query_by_label_contains("appears once internal lights are sampled")
         .is_none());
+}
+
+#[test]
+fn closing_with_unsaved_changes_asks_first() {
+    let mut h = harness();
+    h.run_steps(2);
+    // Without changes, closing is not intercepted.
+    request_close(&mut h);
+    assert!(h.query_by_label("Quit without saving").is_none());
+
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::PHASE_G)
+        .set_value_accesskit(0.1);
+    h.run_steps(2);
+    request_close(&mut h);
+    assert!(h.query_by_label("Quit without saving").is_some());
+    h.get_by_label("Cancel").click();
+    h.run_steps(2);
+    assert!(h.query_by_label("Quit without saving").is_none());
+    assert!(h.state().is_dirty(), "cancel keeps the edits");
+}
+
+fn request_close(h: &mut Harness<'static, LanternApp>) {
+    h.input_mut()
+        .viewports
+        .entry(egui::ViewportId::ROOT)
+        .or_default()
+        .events
+        .push(egui::ViewportEvent::Close);
+    h.run_steps(2);
+}
+
+#[test]
+fn every_control_has_an_accessible_name_and_a_slider_moves_albedo() {
+    let mut h = harness();
+    h.run_steps(2);
+    for section in ["Medium", "Walks, lobes and kernel", "Lights"] {
+        h.get_by_label(section).click();
+        h.run_steps(2);
+    }
+    h.check_accessibility();
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, "albedo (all channels)")
+        .set_value_accesskit(0.5);
+    h.run_steps(2);
+    assert_eq!(h.state().doc.scene.medium.albedo, glam::Vec3::splat(0.5));
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, "K (walks per light)")
+        .set_value_accesskit(16.0);
+    h.run_steps(2);
+    assert_eq!(h.state().doc.scene.render.internal.walks, 16);
 }
