@@ -117,6 +117,18 @@ fn orbit_keeps_the_distance_and_framing_shows_the_whole_box() {
 }
 
 #[test]
+fn pan_moves_eye_and_target_together_and_zoom_approaches_the_target() {
+    let mut cam = Camera::default();
+    let offset = cam.eye - cam.target;
+    viewport::pan(&mut cam, eframe::egui::Vec2::new(30.0, -10.0), 400.0);
+    assert!(((cam.eye - cam.target) - offset).length() < 1e-5);
+    assert!(cam.target.x < 0.0, "dragging right moves the scene right");
+    let d = (cam.eye - cam.target).length();
+    viewport::zoom(&mut cam, 0.5);
+    assert!(((cam.eye - cam.target).length() - d * (-0.5f32).exp()).abs() < 1e-4);
+}
+
+#[test]
 fn the_session_round_trips_and_tolerates_old_files() {
     let session = Session {
         exposure: 1.5,

@@ -357,7 +357,13 @@ impl LanternApp {
                 .unwrap_or_default()
         };
         let ctx = cc.egui_ctx.clone();
-        let worker = Worker::start(Box::new(move || ctx.request_repaint()));
+        let worker = Worker::start(Box::new(move |within| {
+            if within.is_zero() {
+                ctx.request_repaint();
+            } else {
+                ctx.request_repaint_after(within);
+            }
+        }));
         let mut app = Self::with_worker(session, worker);
         app.forced_render_size = options.script.as_ref().and_then(|s| s.render_size);
         app.script = options.script;
@@ -373,7 +379,7 @@ impl LanternApp {
 
     /// An application with the default scene and no window (tests).
     pub fn headless() -> Self {
-        Self::with_worker(Session::default(), Worker::start(Box::new(|| {})))
+        Self::with_worker(Session::default(), Worker::start(Box::new(|_| {})))
     }
 
     fn with_worker(session: Session, worker: Worker) -> Self {

@@ -192,8 +192,18 @@ pub struct Snapshot {
 struct Shared {
     latest: Mutex<Option<Arc<Snapshot>>>,
     errors: Mutex<Vec<String>>,
-    wake: Box<dyn Fn() + Send + Sync>,
+    wake: Waker,
 }
+
+/// Tells the UI that something new is there, to be shown within the given
+/// delay (zero: at once).
+pub type Waker = Box<dyn Fn(Duration) + Send + Sync>;
+
+/// How soon refinements of an image already on screen must be shown: often
+/// enough to watch the noise go, rarely enough that redrawing the window
+/// (in software, on machines without a GPU) does not take the CPU from the
+/// render.
+pub const REFINE_INTERVAL: Duration = Duration::from_millis(200);
 
 enum Command {
     Run {
@@ -217,7 +227,7 @@ pub struct Worker {
 impl Worker {
     /// Starts the worker; `wake` is called (from the worker thread) after
     /// every new snapshot or error.
-    pub fn start(wake: Box<dyn Fn() + Send + Sync>) -> Self {
+    pub fn start(wake: Waker) -> Self {
         let (tx, rx) = mpsc::channel();
         let shared = Arc::new(Shared {
             latest: Mutex::new(None),
@@ -301,14 +311,20 @@ fn push_error(shared: &Shared, message: String) {
     if let Ok(mut e) = shared.errors.lock() {
         e.push(message);
     }
-    (shared.wake)();
+    (shared.wake)(Duration::ZERO);
 }
 
 fn publish(shared: &Shared, snapshot: Snapshot) {
+    // The first images of a job are shown at once, refinements in batches.
+    let first = snapshot.streams.iter().all(|s| s.spp <= 1);
     if let Ok(mut l) = shared.latest.lock() {
         *l = Some(Arc::new(snapshot));
     }
-    (shared.wake)();
+    (shared.wake)(if first {
+        Duration::ZERO
+    } else {
+        REFINE_INTERVAL
+    });
 }
 
 /// The density of the last scene, kept because baking a procedural cloud
