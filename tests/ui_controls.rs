@@ -292,3 +292,41 @@ fn every_control_has_an_accessible_name_and_a_slider_moves_albedo() {
     h.run_steps(2);
     assert_eq!(h.state().doc.scene.render.internal.walks, 16);
 }
+
+#[test]
+fn contributing_lights_of_the_pixel_under_the_cursor_and_f_frames_the_volume() {
+    let mut h = harness();
+    h.state_mut().doc.scene.render.internal.lights = 256;
+    h.state_mut().doc.scene.render.internal.walks = 8;
+    h.state_mut().session.compare = CompareMode::Internal;
+    h.state_mut().session.contributors_only = true;
+    h.run_steps(2);
+    // Wait for the full-resolution image of the full light set.
+    let start = Instant::now();
+    while !(h.state().display.spp() >= 1
+        && h.state().display.lights().is_some_and(|l| l.len() == 256))
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no internal lights"
+        );
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // The cloud is in the middle of the viewport (right of the panel).
+    let centre = egui::pos2(760.0, 420.0);
+    h.hover_at(centre);
+    h.run_steps(2);
+    let shares = h.state().nav.shares.clone();
+    assert!(h.state().nav.shares_key.is_some(), "shares not queried");
+    assert!(!shares.is_empty(), "no light lights the cloud's centre");
+    let total: f32 = shares.iter().map(|(_, s)| s).sum();
+    assert!((total - 1.0).abs() < 1e-3, "shares sum to {total}");
+
+    // F frames the medium: the camera then looks at the box's centre.
+    h.state_mut().doc.scene.camera.target = glam::Vec3::new(3.0, 0.0, 0.0);
+    h.key_press(egui::Key::F);
+    h.run_steps(2);
+    let target = h.state().doc.scene.camera.target;
+    assert!(target.length() < 1e-4, "target {target}");
+}
