@@ -196,7 +196,11 @@ fn a_dropped_volume_replaces_the_medium_and_is_framed() {
     let app = h.state();
     match &app.doc.scene.medium.density {
         lantern::scene::DensitySource::Grid(g) => {
-            assert_eq!(g.path, std::path::PathBuf::from("puffs.vol"))
+            assert!(
+                g.path.is_absolute() && g.path.ends_with("puffs.vol"),
+                "{:?}",
+                g.path
+            )
         }
         other => panic!("medium not replaced: {other:?}"),
     }
@@ -329,4 +333,25 @@ fn contributing_lights_of_the_pixel_under_the_cursor_and_f_frames_the_volume() {
     h.run_steps(2);
     let target = h.state().doc.scene.camera.target;
     assert!(target.length() < 1e-4, "target {target}");
+}
+
+#[test]
+fn an_example_scene_opens_clean_and_follows_its_method() {
+    let mut h = harness();
+    h.run_steps(2);
+    h.state_mut().doc.scene.medium.g = -0.5;
+    h.run_steps(2);
+    assert!(h.state().is_dirty());
+    let (name, text) = lantern::ui::files::PRESETS[1];
+    lantern::ui::files::open_preset(h.state_mut(), name, text);
+    h.run_steps(2);
+    let app = h.state();
+    assert!(!app.is_dirty(), "a preset is not an unsaved change");
+    assert!(!app.history.can_undo());
+    let expected = match app.doc.scene.render.method {
+        Method::Internal => CompareMode::Internal,
+        Method::Reference => CompareMode::Reference,
+    };
+    assert_eq!(app.session.compare, expected);
+    wait_for_image(&mut h);
 }

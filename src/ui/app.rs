@@ -452,18 +452,23 @@ impl LanternApp {
         }
     }
 
-    fn apply_loaded(&mut self, loaded: Loaded) {
-        self.session.compare = match loaded.scene.render.method {
+    /// Replaces the document with an unmodified `scene` (whose relative
+    /// paths refer to `scene_dir`): fresh undo history, nothing unsaved,
+    /// the view following the scene's method.
+    pub fn replace_scene(&mut self, scene: Scene, scene_dir: PathBuf) {
+        self.session.compare = match scene.render.method {
             Method::Internal => CompareMode::Internal,
             Method::Reference => CompareMode::Reference,
         };
-        self.doc = Document {
-            scene: loaded.scene,
-        };
-        self.scene_dir = loaded.scene_dir;
+        self.doc = Document { scene };
+        self.saved = self.doc.clone();
+        self.scene_dir = scene_dir;
         self.history = History::new(&self.doc);
+    }
+
+    fn apply_loaded(&mut self, loaded: Loaded) {
+        self.replace_scene(loaded.scene, loaded.scene_dir);
         if loaded.is_scene_file {
-            self.saved = self.doc.clone();
             self.path = Some(loaded.path.clone());
             self.session.last_scene = Some(loaded.path.clone());
         } else {
@@ -474,6 +479,7 @@ impl LanternApp {
             self.path = None;
             let aspect = self.render_aspect();
             super::viewport::frame_bounds(&mut self.doc.scene.camera, loaded.bounds, aspect);
+            self.history = History::new(&self.doc);
         }
         files::push_recent(&mut self.session.recent, &loaded.path);
         self.notify(format!("opened {}", loaded.path.display()));

@@ -89,9 +89,10 @@ pub fn load(path: &Path, current: &Scene) -> Result<Loaded, String> {
         Some("ron") => (Scene::load(path).map_err(|e| format!("{e:#}"))?, true),
         Some("vdb" | "vol") => {
             let mut scene = current.clone();
-            let name = path.file_name().map(PathBuf::from).unwrap_or_default();
+            // Absolute, so that the scene still finds it wherever it is saved.
+            let absolute = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_owned());
             scene.medium.density = DensitySource::Grid(GridSource {
-                path: name,
+                path: absolute,
                 format: GridFormat::Auto,
                 grid_name: None,
                 bounds: None,
@@ -220,8 +221,7 @@ pub fn file_menu_ui(ui: &mut egui::Ui, app: &mut LanternApp) {
 pub fn open_preset(app: &mut LanternApp, name: &str, text: &str) {
     match Scene::from_ron(text, Path::new(name)) {
         Ok(scene) => {
-            app.doc.scene = scene;
-            app.scene_dir = presets_dir();
+            app.replace_scene(scene, presets_dir());
             app.path = None;
             app.notify(format!("example scene: {name}"));
         }
