@@ -26,3 +26,4 @@ pub mod cpu;
 pub mod physics;
 pub mod render;
 pub mod scene;
+pub mod validate;
