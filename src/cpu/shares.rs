@@ -15,6 +15,7 @@ use glam::Vec3;
 use crate::physics::gated_walk::{march_clock, Clock, ClockMarch};
 use crate::physics::internal::InternalLights;
 use crate::physics::phase;
+use crate::physics::sh::{sh_basis, MAX_COUNT};
 use crate::physics::volume::{DensityField, Volume};
 
 /// Points along the camera ray's window.
@@ -55,10 +56,11 @@ pub fn light_shares<D: DensityField>(
         return Vec::new();
     }
     let n = -dir;
-    let h = cache.kernel_radius;
     let h1 = cache.softening;
     let dt = window / STEPS as f32;
     let mut share = vec![0.0f32; cache.len()];
+    let mut basis = [0.0f32; MAX_COUNT];
+    sh_basis(cache.sh_order(), n, &mut basis);
     let mut tau = Vec3::ZERO;
     for s in 0..STEPS {
         let t = (s as f32 + 0.5) * dt;
@@ -71,21 +73,14 @@ pub fn light_shares<D: DensityField>(
         // Reconstruction weights of the lights within h.
         let mut weights = Vec::new();
         let mut den = 0.0f32;
-        for (i, l) in cache.lights.iter().enumerate() {
-            let q = (l.position - y).length_squared() / (h * h);
-            if q < 1.0 && cache.recon_scale[i] > 0.0 {
-                let k = (1.0 - q) * (1.0 - q);
-                weights.push((i, k));
-                den += k;
-            }
-        }
-        let scale_y = match clock {
-            Clock::Geometric => 1.0,
-            Clock::OpticalDepth => cache.sigma_grey * rho,
-        };
+        cache.for_each_kernel_weight(y, |i, k| {
+            weights.push((i, k));
+            den += k;
+        });
+        let scale_y = cache.reconstruction_scale(rho);
         if den > 0.0 && scale_y > 0.0 {
             for (i, k) in weights {
-                let j = cache.eval_j(i, n) - cache.eval_s1(i, n);
+                let j = cache.eval_multi_with(i, &basis);
                 share[i] += lum(tr * j) * k * cache.recon_scale[i] * scale_y / den * dt;
             }
         }

@@ -266,10 +266,11 @@ impl InternalLights {
                     if total == Vec3::ZERO {
                         continue;
                     }
+                    let first = per_walk.get(1).copied().unwrap_or(Vec3::ZERO);
                     sh_basis(order, n, &mut y);
                     for c in 0..count {
                         multi[c] += total * (y[c] * w_dir);
-                        f[c] += per_walk.get(1).copied().unwrap_or(Vec3::ZERO) * (y[c] * w_dir);
+                        f[c] += first * (y[c] * w_dir);
                     }
                     for k in 1..=terms {
                         energy[k] += per_walk[k] * (light.weight * w_dir);
@@ -527,33 +528,48 @@ impl InternalLights {
     /// the average is taken of `J_i / c_g(x_i)` and multiplied by `c_g(p)`.
     /// Zero where no light is within `h`.
     pub fn reconstruct_multi(&self, p: Vec3, n: Vec3, density_at_p: f32) -> Vec3 {
-        let scale_p = match self.params.clock {
-            Clock::Geometric => 1.0,
-            Clock::OpticalDepth => self.sigma_grey * density_at_p,
-        };
+        let scale_p = self.reconstruction_scale(density_at_p);
         if scale_p <= 0.0 {
             return Vec3::ZERO;
         }
-        let h = self.kernel_radius;
-        let inv_h2 = 1.0 / (h * h);
         let mut y = [0.0f32; MAX_COUNT];
         sh_basis(self.sh_order, n, &mut y);
         let mut num = Vec3::ZERO;
         let mut den = 0.0f32;
-        self.fine.for_each_near(p, h, |i| {
-            let i = i as usize;
-            let q = (self.lights[i].position - p).length_squared() * inv_h2;
-            if q < 1.0 {
-                let k = (1.0 - q) * (1.0 - q);
-                num += self.eval_multi_with(i, &y) * (k * self.recon_scale[i]);
-                den += k;
-            }
+        self.for_each_kernel_weight(p, |i, k| {
+            num += self.eval_multi_with(i, &y) * (k * self.recon_scale[i]);
+            den += k;
         });
         if den > 0.0 {
             num * (scale_p / den)
         } else {
             Vec3::ZERO
         }
+    }
+
+    /// The factor that turns the kernel average back into `Ĵ` at a point of
+    /// density `density_at_p`: 1, or `c_g(p)` for the optical-depth clock.
+    #[inline]
+    pub(crate) fn reconstruction_scale(&self, density_at_p: f32) -> f32 {
+        match self.params.clock {
+            Clock::Geometric => 1.0,
+            Clock::OpticalDepth => self.sigma_grey * density_at_p,
+        }
+    }
+
+    /// Calls `f(i, K_h(p − x_i))` for every light of the reconstruction
+    /// within `h` of `p`, `K_h(r) = (1 − r²/h²)²`.
+    #[inline]
+    pub(crate) fn for_each_kernel_weight(&self, p: Vec3, mut f: impl FnMut(usize, f32)) {
+        let h = self.kernel_radius;
+        let inv_h2 = 1.0 / (h * h);
+        self.fine.for_each_near(p, h, |i| {
+            let i = i as usize;
+            let q = (self.lights[i].position - p).length_squared() * inv_h2;
+            if q < 1.0 {
+                f(i, (1.0 - q) * (1.0 - q));
+            }
+        });
     }
 }
 
