@@ -5,16 +5,19 @@
 //! `lantern` alone, or `lantern view [SCENE]`, opens the previewer.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::cpu::Renderer;
 use crate::render::export::write_image;
 use crate::render::tonemap::ViewTransform;
-use crate::render::Prepared;
-use crate::scene::{Method, Scene};
+use crate::render::{Film, Prepared};
+use crate::scene::{ClockKind, InternalSettings, Method, Scene};
 
 /// Lantern: multiple scattering as internal lights, live.
 #[derive(Debug, Parser)]
@@ -30,12 +33,98 @@ pub struct Cli {
 pub enum MethodArg {
     /// The unbiased volumetric path tracer.
     Reference,
+    /// Multiple scatter as internal lights.
+    Internal,
+}
+
+/// Clock names on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum ClockArg {
+    /// Geometric path length (`s*` is a distance).
+    Geometric,
+    /// Optical depth (`s*` is a number of mean free paths).
+    OpticalDepth,
+}
+
+impl From<ClockArg> for ClockKind {
+    fn from(c: ClockArg) -> Self {
+        match c {
+            ClockArg::Geometric => ClockKind::Geometric,
+            ClockArg::OpticalDepth => ClockKind::OpticalDepth,
+        }
+    }
+}
+
+/// Overrides of the internal-lights parameters (default: the scene's).
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct InternalArgs {
+    /// Window length s* (distance, or mean free paths for the optical-depth clock).
+    #[arg(long)]
+    pub s_star: Option<f32>,
+    /// Number of internal lights M.
+    #[arg(long = "lights")]
+    pub lights: Option<u32>,
+    /// Series truncation N (terms k = 0..=N).
+    #[arg(long)]
+    pub terms: Option<u32>,
+    /// Time-gated walks per light K.
+    #[arg(long)]
+    pub walks: Option<u32>,
+    /// Spherical-harmonics order of F and J.
+    #[arg(long)]
+    pub sh_order: Option<u32>,
+    /// Kernel radius h (world units; default: 2.5 x the mean light spacing).
+    #[arg(long)]
+    pub kernel_radius: Option<f32>,
+    /// Uniform fraction u of the light placement.
+    #[arg(long)]
+    pub uniform_mix: Option<f32>,
+    /// What the path-length clock counts.
+    #[arg(long, value_enum)]
+    pub clock: Option<ClockArg>,
+    /// Internal-light samples per camera sample.
+    #[arg(long)]
+    pub light_samples: Option<u32>,
+}
+
+impl InternalArgs {
+    /// Writes the given overrides into `settings`.
+    pub fn apply(&self, settings: &mut InternalSettings) {
+        if let Some(v) = self.s_star {
+            settings.s_star = Some(v);
+        }
+        if let Some(v) = self.lights {
+            settings.lights = v;
+        }
+        if let Some(v) = self.terms {
+            settings.terms = v;
+        }
+        if let Some(v) = self.walks {
+            settings.walks = v;
+        }
+        if let Some(v) = self.sh_order {
+            settings.sh_order = v;
+        }
+        if let Some(v) = self.kernel_radius {
+            settings.kernel_radius = Some(v);
+        }
+        if let Some(v) = self.uniform_mix {
+            settings.uniform_mix = v;
+        }
+        if let Some(v) = self.clock {
+            settings.clock = v.into();
+        }
+        if let Some(v) = self.light_samples {
+            settings.light_samples = v;
+        }
+    }
 }
 
 impl From<MethodArg> for Method {
     fn from(m: MethodArg) -> Self {
         match m {
             MethodArg::Reference => Method::Reference,
+            MethodArg::Internal => Method::Internal,
         }
     }
 }
@@ -74,6 +163,9 @@ pub enum Command {
         /// View transform, for PNG output.
         #[arg(long, value_enum, default_value_t = ViewTransform::Filmic)]
         view: ViewTransform,
+        /// Internal-lights parameters.
+        #[command(flatten)]
+        internal: InternalArgs,
     },
     /// Measure the renderer's speed (samples per second) on scenes.
     Bench {
@@ -91,7 +183,17 @@ pub enum Command {
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// The estimator.
+        #[arg(long, value_enum, default_value_t = MethodArg::Reference)]
+        method: MethodArg,
+        /// Internal-lights parameters.
+        #[command(flatten)]
+        internal: InternalArgs,
     },
+    /// Measure the internal-lights method against the reference: sweeps of
+    /// s* (with (N+1)s* fixed), N and M; prints a table and writes images and
+    /// plots.
+    Validate(crate::validate::ValidateArgs),
 }
 
 /// Runs the command line; the binary's `main` calls this.
@@ -108,6 +210,7 @@ pub fn run(cli: Cli) -> Result<()> {
             threads,
             exposure,
             view,
+            internal,
         }) => {
             set_threads(threads)?;
             render_command(
@@ -118,6 +221,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 seed,
                 exposure,
                 view,
+                &internal,
             )
         }
         Some(Command::Bench {
@@ -126,10 +230,13 @@ pub fn run(cli: Cli) -> Result<()> {
             repeats,
             size,
             threads,
+            method,
+            internal,
         }) => {
             set_threads(threads)?;
-            bench_command(scenes, spp, repeats, size)
+            bench_command(scenes, spp, repeats, size, method.into(), &internal)
         }
+        Some(Command::Validate(args)) => crate::validate::run(&args),
     }
 }
 
@@ -162,6 +269,7 @@ pub fn load_prepared(path: &Path) -> Result<Prepared> {
     Ok(Prepared::new(scene, dir)?)
 }
 
+#[allow(clippy::too_many_arguments)] // one per command-line option
 fn render_command(
     scene_path: &Path,
     method: Option<Method>,
@@ -170,6 +278,7 @@ fn render_command(
     seed: Option<u64>,
     exposure: f32,
     view: ViewTransform,
+    internal: &InternalArgs,
 ) -> Result<()> {
     match crate::render::export::extension(out).as_deref() {
         Some("exr") | Some("png") => {}
@@ -182,13 +291,44 @@ fn render_command(
         bail!("--spp must be at least 1");
     }
     let t_load = Instant::now();
-    let prepared = load_prepared(scene_path)?;
+    let prepared = Arc::new(load_prepared(scene_path)?);
     let load_secs = t_load.elapsed().as_secs_f64();
-    let settings = &prepared.scene.render;
-    let method = method.unwrap_or(settings.method);
-    let spp = spp.unwrap_or(settings.spp);
-    let seed = seed.unwrap_or(settings.seed);
+    let mut settings = prepared.scene.render.clone();
+    if let Some(m) = method {
+        settings.method = m;
+    }
+    if let Some(s) = spp {
+        settings.spp = s;
+    }
+    if let Some(s) = seed {
+        settings.seed = s;
+    }
+    internal.apply(&mut settings.internal);
+    settings
+        .internal
+        .validate(scene_path)
+        .context("invalid internal-lights parameter on the command line")?;
+    let method = settings.method;
+    let spp = settings.spp;
     let (w, h) = (prepared.camera.width, prepared.camera.height);
+    let t_build = Instant::now();
+    let never = AtomicBool::new(false);
+    let renderer = Renderer::new(prepared.clone(), &settings, &never)
+        .context("internal-light build was cancelled")?;
+    let build_secs = t_build.elapsed().as_secs_f64();
+    if let Some(lights) = renderer.internal_lights() {
+        println!(
+            "internal lights: M = {}, s* = {:.4}, N = {}, K = {}, h = {:.4}, clock {:?}: placed in {:.3} s, walked in {:.3} s",
+            lights.len(),
+            lights.s_star,
+            lights.params.terms,
+            lights.params.walks,
+            lights.kernel_radius,
+            lights.params.clock,
+            lights.timings.placement,
+            lights.timings.walks + lights.timings.index,
+        );
+    }
 
     let bar = ProgressBar::new(spp as u64);
     bar.set_style(
@@ -198,32 +338,61 @@ fn render_command(
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let start = Instant::now();
-    let film = crate::cpu::render(&prepared, method, seed, spp, |_| {
+    let mut film = Film::new(w, h);
+    let mut single = Film::new(w, h);
+    for pass in 0..spp {
+        let img = renderer
+            .pass(pass, &never)
+            .context("render was cancelled")?;
+        film.add_pass(&img.total);
+        single.add_pass(&img.single);
         bar.inc(1);
-        true
-    });
+    }
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
     let samples = w as f64 * h as f64 * film.samples as f64;
     write_image(out, w, h, &film.mean(), exposure, view)?;
     let mean = film.image_mean();
     println!(
-        "rendered {} ({w}×{h}, {} spp, {:?}) in {:.2} s (+{:.2} s loading): {:.3} M samples/s; image mean RGB {:.5} {:.5} {:.5}; wrote {}",
+        "rendered {} ({w}×{h}, {} spp, {:?}) in {:.2} s (+{:.2} s loading, {:.2} s re-sampling): {:.3} M samples/s; image mean RGB {:.5} {:.5} {:.5}; wrote {}",
         scene_path.display(),
         film.samples,
         method,
         secs,
         load_secs,
+        build_secs,
         samples / secs / 1e6,
         mean.x,
         mean.y,
         mean.z,
         out.display()
     );
+    let s = single.image_mean();
+    let rest = mean - s;
+    println!(
+        "  single scatter mean {:.5} {:.5} {:.5}; {} mean {:.5} {:.5} {:.5}",
+        s.x,
+        s.y,
+        s.z,
+        match method {
+            Method::Reference => "multiple scatter",
+            Method::Internal => "internal-light part",
+        },
+        rest.x,
+        rest.y,
+        rest.z
+    );
     Ok(())
 }
 
-fn bench_command(scenes: Vec<PathBuf>, spp: u32, repeats: u32, size: Option<u32>) -> Result<()> {
+fn bench_command(
+    scenes: Vec<PathBuf>,
+    spp: u32,
+    repeats: u32,
+    size: Option<u32>,
+    method: Method,
+    internal: &InternalArgs,
+) -> Result<()> {
     if spp == 0 || repeats == 0 {
         bail!("--spp and --repeats must be at least 1");
     }
@@ -239,8 +408,8 @@ fn bench_command(scenes: Vec<PathBuf>, spp: u32, repeats: u32, size: Option<u32>
         scenes
     };
     println!(
-        "{:<28} {:>9} {:>6} {:>12} {:>14}",
-        "scene", "size", "spp", "median s", "M samples/s"
+        "{:<28} {:>9} {:>6} {:>12} {:>14} {:>14}",
+        "scene", "size", "spp", "median s", "M samples/s", "re-sample s"
     );
     for path in scenes {
         let mut scene = Scene::load(&path)?;
@@ -249,28 +418,43 @@ fn bench_command(scenes: Vec<PathBuf>, spp: u32, repeats: u32, size: Option<u32>
             scene.camera.height = s;
             scene.validate(&path)?;
         }
+        scene.render.method = method;
+        internal.apply(&mut scene.render.internal);
+        scene.render.internal.validate(&path)?;
         let dir = path.parent().unwrap_or(Path::new("."));
-        let prepared = Prepared::new(scene, dir)?;
+        let prepared = Arc::new(Prepared::new(scene, dir)?);
         let (w, h) = (prepared.camera.width, prepared.camera.height);
+        let never = AtomicBool::new(false);
         let mut times = Vec::new();
+        let mut builds = Vec::new();
         for r in 0..repeats {
+            let mut settings = prepared.scene.render.clone();
+            settings.seed = r as u64;
             let start = Instant::now();
-            let film = crate::cpu::render(&prepared, Method::Reference, r as u64, spp, |_| true);
+            let renderer =
+                Renderer::new(prepared.clone(), &settings, &never).context("cancelled")?;
+            builds.push(start.elapsed().as_secs_f64());
+            let start = Instant::now();
+            for pass in 0..spp {
+                std::hint::black_box(renderer.pass(pass, &never));
+            }
             times.push(start.elapsed().as_secs_f64());
-            std::hint::black_box(film.samples);
         }
         times.sort_by(f64::total_cmp);
+        builds.sort_by(f64::total_cmp);
         let median = times[times.len() / 2];
+        let build = builds[builds.len() / 2];
         let samples = w as f64 * h as f64 * spp as f64;
         println!(
-            "{:<28} {:>9} {:>6} {:>12.3} {:>14.3}",
+            "{:<28} {:>9} {:>6} {:>12.3} {:>14.3} {:>14.3}",
             path.file_name()
                 .map(|n| n.to_string_lossy())
                 .unwrap_or_default(),
             format!("{w}×{h}"),
             spp,
             median,
-            samples / median / 1e6
+            samples / median / 1e6,
+            build
         );
     }
     Ok(())

@@ -28,3 +28,4 @@ pub mod physics;
 pub mod render;
 pub mod scene;
 pub mod ui;
+pub mod validate;

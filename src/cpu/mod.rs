@@ -1,49 +1,197 @@
 //! The CPU backend: rayon-parallel, progressive passes of one sample per
-//! pixel. Every pixel's random stream depends only on (seed, pixel, pass),
-//! so an image reproduces whatever the number of threads.
+//! pixel, for both estimators. Every pixel's random stream depends only on
+//! (seed, pixel, pass), so an image reproduces whatever the number of
+//! threads. A [`Renderer`] owns what a render needs between passes: the
+//! prepared scene and, for the internal-lights method, the cached lights.
 
-pub mod reference;
+pub mod shares;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 use glam::Vec3;
 use rayon::prelude::*;
 
+use crate::physics::gather::gather;
+use crate::physics::internal::InternalLights;
+use crate::physics::reference::radiance_split;
 use crate::physics::rng::Rng;
-use crate::render::{Film, Prepared};
-use crate::scene::Method;
+use crate::render::{internal_params, Film, Prepared};
+use crate::scene::{Method, RenderSettings};
 
-/// Renders pass number `pass` (one sample per pixel) with `method`.
-pub fn render_pass(prepared: &Prepared, method: Method, seed: u64, pass: u32) -> Vec<Vec3> {
-    let cam = &prepared.camera;
-    let width = cam.width as usize;
-    let mut out = vec![Vec3::ZERO; width * cam.height as usize];
-    out.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
-        for (x, px) in row.iter_mut().enumerate() {
-            let index = (y * width + x) as u32;
-            let mut rng = Rng::for_sample(seed, index, pass);
-            let (jx, jy) = (rng.next_f32(), rng.next_f32());
-            let dir = cam.ray_dir(x as f32 + jx, y as f32 + jy);
-            *px = match method {
-                Method::Reference => reference::sample(prepared, cam.eye, dir, &mut rng),
-            };
+/// One pass (one sample per pixel), by part. Rows top to bottom.
+#[derive(Clone, Debug, Default)]
+pub struct PassImage {
+    /// The full estimate.
+    pub total: Vec<Vec3>,
+    /// Single scattering: the reference's first collision, or the
+    /// internal-lights method's exact `k = 0` march.
+    pub single: Vec<Vec3>,
+    /// The rest: multiple scattering for the reference, the internal-light
+    /// part (`L₀`'s `k ≥ 1` reconstruction plus `L₁`) for the method.
+    pub internal: Vec<Vec3>,
+}
+
+/// A progressive CPU renderer for one scene and one set of settings.
+pub struct Renderer {
+    prepared: Arc<Prepared>,
+    settings: RenderSettings,
+    internal: Option<Arc<InternalLights>>,
+}
+
+impl Renderer {
+    /// Builds the renderer; for the internal-lights method this places the
+    /// lights and runs the walks. Returns `None` if `cancel` is set first.
+    pub fn new(
+        prepared: Arc<Prepared>,
+        settings: &RenderSettings,
+        cancel: &AtomicBool,
+    ) -> Option<Self> {
+        let internal = match settings.method {
+            Method::Reference => None,
+            Method::Internal => {
+                let params = internal_params(&prepared, settings);
+                Some(Arc::new(InternalLights::build(
+                    &prepared.volume,
+                    &prepared.lights,
+                    &params,
+                    cancel,
+                )?))
+            }
+        };
+        Some(Self {
+            prepared,
+            settings: settings.clone(),
+            internal,
+        })
+    }
+
+    /// A renderer that reuses already built internal lights (which must
+    /// belong to `prepared` and `settings`).
+    pub fn with_lights(
+        prepared: Arc<Prepared>,
+        settings: &RenderSettings,
+        internal: Option<Arc<InternalLights>>,
+    ) -> Self {
+        Self {
+            prepared,
+            settings: settings.clone(),
+            internal,
         }
-    });
-    out
+    }
+
+    /// The prepared scene.
+    pub fn prepared(&self) -> &Arc<Prepared> {
+        &self.prepared
+    }
+
+    /// The settings it renders with.
+    pub fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
+
+    /// The cached internal lights (internal-lights method only).
+    pub fn internal_lights(&self) -> Option<&InternalLights> {
+        self.internal.as_deref()
+    }
+
+    /// The cached internal lights, shared.
+    pub fn internal_lights_arc(&self) -> Option<&Arc<InternalLights>> {
+        self.internal.as_ref()
+    }
+
+    /// One sample along the camera ray through film position `(px, py)`.
+    #[inline]
+    fn sample(&self, dir: Vec3, rng: &mut Rng) -> (Vec3, Vec3) {
+        let p = &self.prepared;
+        match &self.internal {
+            None => radiance_split(&p.volume, &p.lights, p.camera.eye, dir, u32::MAX, rng),
+            Some(cache) => {
+                let s = gather(
+                    &p.volume,
+                    &p.lights,
+                    cache,
+                    p.camera.eye,
+                    dir,
+                    self.settings.internal.light_samples,
+                    rng,
+                );
+                (s.total(), s.single)
+            }
+        }
+    }
+
+    /// Renders pass number `pass`; `None` if `cancel` is set meanwhile.
+    pub fn pass(&self, pass: u32, cancel: &AtomicBool) -> Option<PassImage> {
+        let cam = &self.prepared.camera;
+        let width = cam.width as usize;
+        let n = width * cam.height as usize;
+        let mut total = vec![Vec3::ZERO; n];
+        let mut single = vec![Vec3::ZERO; n];
+        let seed = self.settings.seed;
+        total
+            .par_chunks_mut(width)
+            .zip(single.par_chunks_mut(width))
+            .enumerate()
+            .for_each(|(y, (row, row_single))| {
+                if cancel.load(Ordering::Relaxed) {
+                    return;
+                }
+                for x in 0..width {
+                    let index = (y * width + x) as u32;
+                    let mut rng = Rng::for_sample(seed, index, pass);
+                    let (jx, jy) = (rng.next_f32(), rng.next_f32());
+                    let dir = cam.ray_dir(x as f32 + jx, y as f32 + jy);
+                    let (t, s) = self.sample(dir, &mut rng);
+                    row[x] = t;
+                    row_single[x] = s;
+                }
+            });
+        if cancel.load(Ordering::Relaxed) {
+            return None;
+        }
+        let internal = total.iter().zip(&single).map(|(t, s)| *t - *s).collect();
+        Some(PassImage {
+            total,
+            single,
+            internal,
+        })
+    }
+
+    /// Lights contributing to pixel `(x, y)` with their shares (summing to
+    /// one), largest first; empty for the reference method. See
+    /// [`shares::light_shares`].
+    pub fn light_shares(&self, x: u32, y: u32) -> Vec<(usize, f32)> {
+        match &self.internal {
+            None => Vec::new(),
+            Some(cache) => {
+                let cam = &self.prepared.camera;
+                let dir = cam.ray_dir(x as f32 + 0.5, y as f32 + 0.5);
+                shares::light_shares(&self.prepared.volume, cache, cam.eye, dir)
+            }
+        }
+    }
 }
 
 /// Renders `spp` passes into a new film, calling `on_pass` after each; it
-/// returns `false` to stop early (cancellation).
+/// returns `false` to stop early. Builds the internal lights first when the
+/// method needs them.
 pub fn render(
-    prepared: &Prepared,
-    method: Method,
-    seed: u64,
-    spp: u32,
+    prepared: Arc<Prepared>,
+    settings: &RenderSettings,
     mut on_pass: impl FnMut(&Film) -> bool,
 ) -> Film {
-    let cam = &prepared.camera;
+    let never = AtomicBool::new(false);
+    let cam = prepared.camera;
     let mut film = Film::new(cam.width, cam.height);
-    for pass in 0..spp {
-        let samples = render_pass(prepared, method, seed, pass);
-        film.add_pass(&samples);
+    let Some(renderer) = Renderer::new(prepared, settings, &never) else {
+        return film;
+    };
+    for pass in 0..settings.spp {
+        let Some(img) = renderer.pass(pass, &never) else {
+            break;
+        };
+        film.add_pass(&img.total);
         if !on_pass(&film) {
             break;
         }

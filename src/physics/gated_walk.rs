@@ -107,7 +107,7 @@ pub fn clock_rate<D: DensityField>(vol: &Volume<D>, clock: Clock, p: Vec3) -> f3
 }
 
 /// Lattice steps per majorant cell for the optical-depth quadrature.
-const CLOCK_STEPS_PER_CELL: f32 = 8.0;
+const CLOCK_STEPS_PER_CELL: f32 = 2.0;
 
 /// Where a clock budget runs out along a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -226,6 +226,23 @@ pub fn accumulate_j<D: DensityField>(
     rng: &mut Rng,
     out: &mut [Vec3],
 ) {
+    accumulate_j_from(vol, lights, z, n, settings, 0, rng, out);
+}
+
+/// [`accumulate_j`] for the terms `k ≥ first` only (the others are left
+/// untouched and cost no shadow rays): the internal lights evaluate the
+/// `k = 0` term, `S₁` itself, exactly and need the walk only for `k ≥ 1`.
+#[allow(clippy::too_many_arguments)] // accumulate_j's arguments and `first`
+pub fn accumulate_j_from<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    first: u32,
+    rng: &mut Rng,
+    out: &mut [Vec3],
+) {
     let scatter = vol.optics.albedo * vol.optics.sigma_t;
     let rho_z = vol.density.density(z);
     if settings.clock == Clock::OpticalDepth && rho_z <= 0.0 {
@@ -250,7 +267,7 @@ pub fn accumulate_j<D: DensityField>(
                 Clock::Geometric => vol.density.density(zk),
                 Clock::OpticalDepth => rho_z,
             };
-            if rho <= 0.0 || w == Vec3::ZERO {
+            if k < first || rho <= 0.0 || w == Vec3::ZERO {
                 return;
             }
             let source = single_scatter_source(vol, lights, zk, nk, rng);
@@ -385,6 +402,204 @@ fn walk<D: DensityField>(
                 // The flight goes on from the gate: flights are memoryless,
                 // and the quadrature lattice is re-anchored here.
                 clock_at_origin = gate_clock;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::volume::Optics;
+
+    /// Density `base + amp·sin(x)·sin(y)` in a box so large that no walk
+    /// leaves it: an unbounded medium.
+    struct Field {
+        base: f32,
+        amp: f32,
+    }
+
+    const HALF: f32 = 1.0e4;
+
+    impl DensityField for Field {
+        fn density(&self, p: Vec3) -> f32 {
+            self.base + self.amp * (p.x.sin() * p.y.sin())
+        }
+        fn bounds(&self) -> (Vec3, Vec3) {
+            (Vec3::splat(-HALF), Vec3::splat(HALF))
+        }
+        fn max_in_box(&self, _: Vec3, _: Vec3) -> f32 {
+            self.base + self.amp
+        }
+    }
+
+    fn volume(base: f32, amp: f32, albedo: f32) -> Volume<Field> {
+        Volume::new(
+            Field { base, amp },
+            Optics {
+                sigma_t: Vec3::splat(1.0),
+                albedo: Vec3::splat(albedo),
+                g: 0.3,
+            },
+            // Coarse majorant cells: the geometric clock needs no
+            // quadrature; the heterogeneous case below re-grids.
+            8,
+        )
+    }
+
+    /// Collisions per window of the clock for `walks` walks: a histogram of
+    /// counts in windows `1..=N` (the windows between consecutive gates).
+    fn window_counts(vol: &Volume<Field>, settings: &GateSettings, walks: u32) -> Vec<u64> {
+        let mut hist = vec![0u64; 64];
+        for w in 0..walks {
+            let mut rng = Rng::for_sample(5, w, 0);
+            let mut per_window = vec![0usize; settings.n_terms as usize];
+            let s = settings.s_star;
+            walk(
+                vol,
+                Vec3::ZERO,
+                Vec3::Z,
+                settings,
+                &mut rng,
+                |_, _, _, _, _| {},
+                |clock| {
+                    let k = (clock / s).floor() as usize;
+                    if k < per_window.len() {
+                        per_window[k] += 1;
+                    }
+                },
+            );
+            for c in per_window {
+                hist[c.min(63)] += 1;
+            }
+        }
+        hist
+    }
+
+    /// χ² of a histogram against Poisson(`mean`), pooling the tail where
+    /// fewer than 5 are expected; returns (χ², degrees of freedom).
+    fn chi2_poisson(hist: &[u64], mean: f64) -> (f64, usize) {
+        let n: u64 = hist.iter().sum();
+        let mut p = (-mean).exp();
+        let mut chi2 = 0.0;
+        let mut bins = 0;
+        let mut rest_obs = n as f64;
+        let mut rest_p = 1.0;
+        for (k, &obs) in hist.iter().enumerate() {
+            if k > 0 {
+                p *= mean / k as f64;
+            }
+            let expect = p * n as f64;
+            if expect < 5.0 || rest_p - p < 1e-9 {
+                break;
+            }
+            chi2 += (obs as f64 - expect).powi(2) / expect;
+            rest_obs -= obs as f64;
+            rest_p -= p;
+            bins += 1;
+        }
+        let expect = rest_p * n as f64;
+        if expect > 0.0 {
+            chi2 += (rest_obs - expect).powi(2) / expect;
+            bins += 1;
+        }
+        (chi2, bins - 1)
+    }
+
+    #[test]
+    fn collisions_per_window_are_poisson() {
+        // Homogeneous, geometric clock: Poisson(σ_t s*) per window.
+        let vol = volume(1.0, 0.0, 1.0);
+        let settings = GateSettings {
+            s_star: 1.7,
+            n_terms: 6,
+            clock: Clock::Geometric,
+            rr_start: u32::MAX,
+        };
+        let hist = window_counts(&vol, &settings, 20_000);
+        let (chi2, dof) = chi2_poisson(&hist, 1.7);
+        eprintln!("geometric: χ² = {chi2:.1} with {dof} dof");
+        // 99.9th percentile of χ² for ≤ 10 degrees of freedom is ≤ 29.6.
+        assert!(dof >= 4 && chi2 < 29.6, "χ² = {chi2}, dof = {dof}");
+
+        // Heterogeneous, optical-depth clock: Poisson(τ*) per window
+        // whatever the density (METHOD.md §7).
+        let vol = Volume::new(
+            Field {
+                base: 1.0,
+                amp: 0.8,
+            },
+            Optics {
+                sigma_t: Vec3::splat(1.0),
+                albedo: Vec3::ONE,
+                g: 0.3,
+            },
+            8,
+        );
+        let mut vol = vol;
+        // Majorant cells of 120/256 ≈ 0.47 (quadrature step 0.23) resolve
+        // sin(x) sin(y), over a box that 5 windows of τ* = 1.3 never leave
+        // (a walk of ~7 collisions moves a few units).
+        vol.bounds = (Vec3::splat(-60.0), Vec3::splat(60.0));
+        vol.majorants = crate::physics::majorant::MajorantGrid::build(
+            vol.bounds.0,
+            vol.bounds.1,
+            256,
+            |_, _| 1.8,
+        );
+        let settings = GateSettings {
+            s_star: 1.3,
+            n_terms: 5,
+            clock: Clock::OpticalDepth,
+            rr_start: u32::MAX,
+        };
+        let hist = window_counts(&vol, &settings, 20_000);
+        let (chi2, dof) = chi2_poisson(&hist, 1.3);
+        eprintln!("optical depth: χ² = {chi2:.1} with {dof} dof");
+        assert!(dof >= 4 && chi2 < 29.6, "χ² = {chi2}, dof = {dof}");
+    }
+
+    #[test]
+    fn albedo_one_conserves_the_weight() {
+        // With α = 1 and no boundary, every gate is reached, and the weight
+        // there is exactly 1 without Russian roulette, and 1 on average
+        // with it.
+        let vol = volume(0.7, 0.0, 1.0);
+        for (rr_start, exact) in [(u32::MAX, true), (2, false)] {
+            let settings = GateSettings {
+                s_star: 2.0,
+                n_terms: 12,
+                clock: Clock::Geometric,
+                rr_start,
+            };
+            let walks = 20_000u32;
+            let mut sum = [0.0f64; 13];
+            let mut sum2 = [0.0f64; 13];
+            for w in 0..walks {
+                let mut rng = Rng::for_sample(8, w, 1);
+                gated_walk(
+                    &vol,
+                    Vec3::ZERO,
+                    Vec3::X,
+                    &settings,
+                    &mut rng,
+                    |k, wt, _, _| {
+                        if exact {
+                            assert!((wt - Vec3::ONE).abs().max_element() < 1e-5, "{wt}");
+                        }
+                        sum[k as usize] += wt.x as f64;
+                        sum2[k as usize] += (wt.x as f64).powi(2);
+                    },
+                );
+            }
+            for k in 0..=12 {
+                let mean = sum[k] / walks as f64;
+                let var = (sum2[k] / walks as f64 - mean * mean).max(0.0);
+                let se = (var / walks as f64).sqrt();
+                assert!(
+                    (mean - 1.0).abs() <= 4.0 * se + 1e-6,
+                    "rr_start {rr_start}, gate {k}: mean weight {mean} ± {se}"
+                );
             }
         }
     }

@@ -9,6 +9,9 @@
 
 pub mod frame;
 pub mod gated_walk;
+pub mod gather;
+pub mod internal;
+pub mod light_index;
 pub mod lights;
 pub mod majorant;
 pub mod phase;

@@ -50,6 +50,20 @@ pub fn radiance<D: DensityField>(
     max_collisions: u32,
     rng: &mut Rng,
 ) -> Vec3 {
+    radiance_split(vol, lights, origin, dir, max_collisions, rng).0
+}
+
+/// [`radiance`] and, second, its single-scattering part (the light
+/// scattered at the first collision only).
+pub fn radiance_split<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    origin: Vec3,
+    dir: Vec3,
+    max_collisions: u32,
+    rng: &mut Rng,
+) -> (Vec3, Vec3) {
+    let mut single = Vec3::ZERO;
     let mut radiance = Vec3::ZERO;
     let mut weight = Vec3::ONE;
     let mut o = origin;
@@ -61,7 +75,11 @@ pub fn radiance<D: DensityField>(
         };
         let p = o + d * t;
         weight *= vol.optics.albedo;
-        radiance += weight * single_scatter_source(vol, lights, p, -d, rng);
+        let contribution = weight * single_scatter_source(vol, lights, p, -d, rng);
+        radiance += contribution;
+        if depth == 0 {
+            single = contribution;
+        }
         depth += 1;
         if depth >= max_collisions {
             break;
@@ -76,5 +94,5 @@ pub fn radiance<D: DensityField>(
         d = phase::sample_hg(vol.optics.g, d, rng.next_f32(), rng.next_f32());
         o = p;
     }
-    radiance
+    (radiance, single)
 }

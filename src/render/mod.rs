@@ -7,8 +7,9 @@
 
 pub mod export;
 pub mod film;
+pub mod plot;
 pub mod prepared;
 pub mod tonemap;
 
 pub use film::Film;
-pub use prepared::{Prepared, SceneVolume};
+pub use prepared::{default_s_star, internal_params, Prepared, SceneVolume};

@@ -5,9 +5,11 @@ use std::path::Path;
 
 use glam::Vec3;
 
+use crate::physics::gated_walk::Clock;
+use crate::physics::internal::InternalParams;
 use crate::physics::lights::{Lights, PointLight, Sun};
 use crate::physics::volume::{DensityField, Optics, Volume};
-use crate::scene::{CameraFrame, Density, Light, Scene, SceneError};
+use crate::scene::{CameraFrame, ClockKind, Density, Light, RenderSettings, Scene, SceneError};
 
 /// Majorant cells along the longest axis of the medium's box.
 pub const MAJORANT_CELLS: u32 = 32;
@@ -89,4 +91,59 @@ pub fn lights_of(lights: &[Light]) -> Lights {
         }
     }
     out
+}
+
+/// The internal-lights parameters of `settings` for this scene, with the
+/// defaults resolved: `s*` is the diagonal of the medium's box for the
+/// geometric clock, and for the optical-depth clock the diagonal's optical
+/// depth at the box's mean density (`max(σ_t) · ρ̄ · diagonal`, with `ρ̄`
+/// from a 24³ midpoint rule).
+pub fn internal_params(prepared: &Prepared, settings: &RenderSettings) -> InternalParams {
+    let s = &settings.internal;
+    let clock = match s.clock {
+        ClockKind::Geometric => Clock::Geometric,
+        ClockKind::OpticalDepth => Clock::OpticalDepth,
+    };
+    let s_star = s
+        .s_star
+        .unwrap_or_else(|| default_s_star(&prepared.volume, clock));
+    InternalParams {
+        s_star,
+        lights: s.lights as usize,
+        terms: s.terms,
+        walks: s.walks,
+        sh_order: s.sh_order,
+        kernel_radius: s.kernel_radius,
+        uniform_mix: s.uniform_mix,
+        clock,
+        seed: settings.seed,
+    }
+}
+
+/// The default window `s*` (see [`internal_params`]).
+pub fn default_s_star(volume: &SceneVolume, clock: Clock) -> f32 {
+    let (lo, hi) = volume.bounds;
+    let diagonal = (hi - lo).length();
+    match clock {
+        Clock::Geometric => diagonal,
+        Clock::OpticalDepth => {
+            const N: usize = 24;
+            let mut sum = 0.0f64;
+            for k in 0..N {
+                for j in 0..N {
+                    for i in 0..N {
+                        let f = (Vec3::new(i as f32, j as f32, k as f32) + 0.5) / N as f32;
+                        sum += volume.density.density(lo + (hi - lo) * f) as f64;
+                    }
+                }
+            }
+            let mean = (sum / (N * N * N) as f64) as f32;
+            let s = volume.optics.sigma_t.max_element() * mean * diagonal;
+            if s > 0.0 && s.is_finite() {
+                s
+            } else {
+                1.0
+            }
+        }
+    }
 }

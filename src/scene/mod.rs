@@ -26,7 +26,7 @@ pub use error::SceneError;
 pub use grid::VoxelGrid;
 pub use light::Light;
 pub use medium::{CloudParams, DensitySource, GridFormat, GridSource, Medium};
-pub use settings::{Method, RenderSettings};
+pub use settings::{ClockKind, InternalSettings, Method, RenderSettings};
 
 /// Largest image side accepted, in pixels.
 pub const MAX_IMAGE_SIDE: u32 = 16384;
@@ -324,7 +324,7 @@ impl Scene {
         if self.render.spp == 0 {
             return bad("render.spp", "must be at least 1".into());
         }
-        Ok(())
+        self.render.internal.validate(path)
     }
 
     /// Loads or bakes the density field. Relative grid paths are resolved
@@ -350,5 +350,68 @@ impl Scene {
                 Ok(Density::Grid(Arc::new(grid)))
             }
         }
+    }
+}
+
+impl InternalSettings {
+    /// Checks every parameter against its allowed range; `path` names the
+    /// scene in the error (fields are reported as `render.internal.*`).
+    pub fn validate(&self, path: &Path) -> Result<(), SceneError> {
+        use settings::{MAX_INTERNAL_LIGHTS, MAX_TERMS, MAX_WALKS};
+        let bad = |field: &str, reason: String| {
+            Err(SceneError::invalid(
+                path,
+                &format!("render.internal.{field}"),
+                reason,
+            ))
+        };
+        if let Some(s) = self.s_star {
+            if !(s.is_finite() && s > 0.0) {
+                return bad("s_star", format!("{s} must be finite and positive"));
+            }
+        }
+        if self.lights == 0 || self.lights > MAX_INTERNAL_LIGHTS {
+            return bad(
+                "lights",
+                format!("M = {} must lie in 1..={MAX_INTERNAL_LIGHTS}", self.lights),
+            );
+        }
+        if self.terms > MAX_TERMS {
+            return bad("terms", format!("N = {} exceeds {MAX_TERMS}", self.terms));
+        }
+        if self.walks == 0 || self.walks > MAX_WALKS {
+            return bad(
+                "walks",
+                format!("K = {} must lie in 1..={MAX_WALKS}", self.walks),
+            );
+        }
+        if self.sh_order > crate::physics::sh::MAX_ORDER {
+            return bad(
+                "sh_order",
+                format!(
+                    "{} exceeds the highest supported order {}",
+                    self.sh_order,
+                    crate::physics::sh::MAX_ORDER
+                ),
+            );
+        }
+        if let Some(h) = self.kernel_radius {
+            if !(h.is_finite() && h > 0.0) {
+                return bad("kernel_radius", format!("{h} must be finite and positive"));
+            }
+        }
+        if !(self.uniform_mix.is_finite() && (0.0..=1.0).contains(&self.uniform_mix)) {
+            return bad(
+                "uniform_mix",
+                format!("{} must lie in [0, 1]", self.uniform_mix),
+            );
+        }
+        if self.light_samples == 0 || self.light_samples > 256 {
+            return bad(
+                "light_samples",
+                format!("{} must lie in 1..=256", self.light_samples),
+            );
+        }
+        Ok(())
     }
 }

@@ -5,6 +5,7 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use glam::Vec3;
 use lantern::render::export::write_exr;
@@ -18,15 +19,27 @@ pub fn root() -> PathBuf {
 }
 
 /// Loads and prepares a scene given relative to the repository root.
-pub fn prepare(rel: &str) -> Prepared {
+pub fn prepare(rel: &str) -> Arc<Prepared> {
+    Arc::new(prepare_with(rel, |_| {}))
+}
+
+/// Loads a scene, lets `edit` change it, and prepares it.
+pub fn prepare_with(rel: &str, edit: impl FnOnce(&mut Scene)) -> Prepared {
     let path = root().join(rel);
-    let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let mut scene = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    edit(&mut scene);
+    scene.validate(&path).unwrap_or_else(|e| panic!("{e}"));
     Prepared::new(scene, path.parent().unwrap()).unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// Renders `spp` passes with `method` and `seed`.
-pub fn render(prepared: &Prepared, method: Method, seed: u64, spp: u32) -> Film {
-    lantern::cpu::render(prepared, method, seed, spp, |_| true)
+/// Renders `spp` passes with `method` and `seed` (other settings: the
+/// scene's).
+pub fn render(prepared: &Arc<Prepared>, method: Method, seed: u64, spp: u32) -> Film {
+    let mut settings = prepared.scene.render.clone();
+    settings.method = method;
+    settings.seed = seed;
+    settings.spp = spp;
+    lantern::cpu::render(prepared.clone(), &settings, |_| true)
 }
 
 /// The outcome of comparing two noisy images.

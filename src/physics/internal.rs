@@ -1,0 +1,594 @@
+//! The internal lights (METHOD.md §5): `M` points placed by density, each
+//! with the volume `V_i` it stands for and the path-length series
+//! `J_N(x_i, ·)` estimated by `K` time-gated walks (§4) and stored as real
+//! spherical harmonics, with `F = G(s*) S₁` (the `k = 1` term) kept apart.
+//!
+//! # What a light stores
+//!
+//! `J_N = S₁ + Σ_{k=1}^{N} J_k`. The first term, `S₁(x_i, n)`, is the
+//! single-scatter source: sharply peaked for a forward-scattering phase
+//! function, and known in closed form once the light arriving at `x_i` from
+//! each external light is known. So each internal light stores that
+//! arriving light (irradiance times a transmittance averaged over several
+//! ratio-tracking estimates) and evaluates `S₁` exactly in any direction;
+//! only the multiply scattered part `Σ_{k≥1} J_k`, which is smooth in
+//! angle, goes through the spherical harmonics. (This is where this module
+//! goes beyond the note, which projects all of `J`: the SH order then only
+//! limits the part it represents well.) `J_i(n)` is clamped at zero, since
+//! a truncated SH series rings below zero where the function is small.
+//!
+//! With the optical-depth clock the walks return `Ĵ_k = c_g(x_i) J^τ_k`
+//! (see [`super::gated_walk`]), and everything below uses `Ĵ` in place of
+//! `J`; `k = 0` is `S₁` for both clocks.
+//!
+//! # The energy of each term
+//!
+//! `E_k = Σ_i V_i ∫ J_k(x_i, n) dn` estimates `∫_B ∫_{S²} J_k`, the power
+//! carried by term `k` over the whole medium. It shows how fast the series
+//! converges: the terms beyond `N` are what truncation drops.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::gated_walk::{accumulate_j_from, Clock, GateSettings};
+use super::light_index::LightGrid;
+use super::lights::Lights;
+use super::phase;
+use super::placement::place_lights;
+use super::reference::RR_START_DEPTH;
+use super::rng::Rng;
+use super::sh::{sh_basis, sh_count, MAX_COUNT, MAX_ORDER};
+use super::tracking::transmittance;
+use super::volume::{DensityField, Volume};
+
+/// Stream index (the `pass` of [`Rng::for_sample`]) of the walks, apart
+/// from the placement's and the renders'.
+const WALK_PASS: u32 = 0x7761_6c6b;
+
+/// Cells of the placement density along the longest axis of the box.
+const PLACEMENT_RESOLUTION: u32 = 64;
+
+/// Lights per cluster of the gather's light selection, on average.
+const LIGHTS_PER_CLUSTER: f32 = 24.0;
+
+/// Most clusters along an axis.
+const MAX_CLUSTER_RES: u32 = 12;
+
+/// Parameters of the internal lights, resolved (no defaults left open).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InternalParams {
+    /// Window length `s*` (a distance, or an optical depth for
+    /// [`Clock::OpticalDepth`]).
+    pub s_star: f32,
+    /// Number of lights `M`.
+    pub lights: usize,
+    /// Series truncation `N`.
+    pub terms: u32,
+    /// Walks per light `K`.
+    pub walks: u32,
+    /// SH order of `F` and the multiply scattered part of `J`.
+    pub sh_order: u32,
+    /// Kernel radius `h`; `None`: the mean light spacing,
+    /// `median(V_i)^{1/3}`, times [`AUTO_KERNEL_FACTOR`].
+    pub kernel_radius: Option<f32>,
+    /// Uniform fraction `u` of the placement density.
+    pub uniform_mix: f32,
+    /// The path-length clock.
+    pub clock: Clock,
+    /// Seed of the placement and the walks.
+    pub seed: u64,
+}
+
+/// The automatic kernel radius in units of the mean light spacing: about
+/// 65 lights fall inside the reconstruction kernel's support, which
+/// averages out the walks' noise in `J_i` (with 1.5, about 14 lights, the
+/// thin sphere showed blotches of ±20 % at `K = 64`).
+pub const AUTO_KERNEL_FACTOR: f32 = 2.5;
+
+/// `h₁ / h`: `L₁`'s kernel `1/(r² + h₁²)` is softened far less than the
+/// reconstruction averages. Its bias (METHOD.md §6: it vanishes as
+/// `h₁ → 0`) is an underestimate of the light within `h₁` of each internal
+/// light, which with `h₁ = h` was the largest error at small `s*` (the
+/// window's reach `s*` is then comparable to `h`); its variance is cheap,
+/// since the equiangular sampling of the gather cancels the kernel.
+pub const L1_SOFTENING: f32 = 0.2;
+
+/// One internal light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InternalLight {
+    /// Position `x_i`.
+    pub position: Vec3,
+    /// `ρ(x_i)`.
+    pub density: f32,
+    /// `V_i = 1 / (M p(x_i))`, the volume the light stands for.
+    pub weight: f32,
+}
+
+/// Wall-clock times of a build, in seconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BuildTimings {
+    /// Placement.
+    pub placement: f64,
+    /// Arriving light and time-gated walks with SH projection.
+    pub walks: f64,
+    /// Spatial indices.
+    pub index: f64,
+}
+
+/// The internal lights of one scene and parameter set.
+#[derive(Clone, Debug)]
+pub struct InternalLights {
+    /// The parameters they were built with.
+    pub params: InternalParams,
+    /// Window length `s*`.
+    pub s_star: f32,
+    /// The kernel radius `h` in use (the reconstruction of `L₀`).
+    pub kernel_radius: f32,
+    /// The softening of `L₁`'s bounded kernel `1/(r² + h₁²)`:
+    /// `h₁ = h ·` [`L1_SOFTENING`].
+    pub softening: f32,
+    /// The lights.
+    pub lights: Vec<InternalLight>,
+    /// `E_k` for `k = 0..=N` (see the module doc), RGB.
+    pub term_energy: Vec<Vec3>,
+    /// `∫ρ` over the box, as estimated by the placement.
+    pub density_integral: f32,
+    /// How long the build took.
+    pub timings: BuildTimings,
+    pub(crate) sh_order: u32,
+    pub(crate) sh_count: usize,
+    /// `F_i` SH coefficients, `sh_count` per light.
+    pub(crate) f_coeffs: Vec<Vec3>,
+    /// `Σ_{k≥1} J_k` SH coefficients, `sh_count` per light.
+    pub(crate) multi_coeffs: Vec<Vec3>,
+    /// Light arriving at each internal light from each external light,
+    /// `T E`, `external_count` per light.
+    pub(crate) arrival: Vec<Vec3>,
+    pub(crate) external: Lights,
+    /// `α σ_t` (per unit density) and `g`.
+    pub(crate) scatter: Vec3,
+    pub(crate) g: f32,
+    /// Per light: the factor that turns its `J` into the quantity the
+    /// kernel reconstruction averages (1, or `1/c_g(x_i)` for the
+    /// optical-depth clock; 0: left out of the reconstruction).
+    pub(crate) recon_scale: Vec<f32>,
+    /// Lights near a point, cells of about `h`.
+    pub(crate) fine: LightGrid,
+    /// Light clusters for the gather's light selection.
+    pub(crate) clusters: LightGrid,
+    /// Per cluster: `Σ` power of its lights.
+    pub(crate) cluster_power: Vec<f32>,
+    /// Aligned with `clusters.ids()`: each light's power `V_i |J̄_i|`.
+    pub(crate) light_power: Vec<f32>,
+    /// Clusters with power, for the per-ray selection.
+    pub(crate) live_clusters: Vec<u32>,
+    /// `max(σ_t)`, the optical-depth clock's rate per unit density.
+    pub(crate) sigma_grey: f32,
+}
+
+impl InternalLights {
+    /// Places the lights, runs the walks and builds the indices. Returns
+    /// `None` if `cancel` is set meanwhile.
+    pub fn build<D: DensityField>(
+        vol: &Volume<D>,
+        external: &Lights,
+        params: &InternalParams,
+        cancel: &AtomicBool,
+    ) -> Option<Self> {
+        let start = Instant::now();
+        let m = params.lights.max(1);
+        let placement = place_lights(
+            &vol.density,
+            vol.bounds,
+            m,
+            params.uniform_mix,
+            params.seed,
+            PLACEMENT_RESOLUTION,
+        );
+        let lights: Vec<InternalLight> = placement
+            .lights
+            .par_iter()
+            .map(|l| InternalLight {
+                position: l.position,
+                density: vol.density.density(l.position),
+                weight: l.weight,
+            })
+            .collect();
+        let t_place = start.elapsed().as_secs_f64();
+        if cancel.load(Ordering::Relaxed) {
+            return None;
+        }
+
+        let start = Instant::now();
+        let order = params.sh_order.min(MAX_ORDER);
+        let count = sh_count(order);
+        let n_ext = external.suns.len() + external.points.len();
+        let terms = params.terms as usize;
+        let gate = GateSettings {
+            s_star: params.s_star,
+            n_terms: params.terms,
+            clock: params.clock,
+            rr_start: RR_START_DEPTH,
+        };
+        let walks = params.walks.max(1);
+        let tr_estimates = (walks / 4).clamp(4, 64);
+        let scatter = vol.optics.albedo * vol.optics.sigma_t;
+        struct Walked {
+            f: Vec<Vec3>,
+            multi: Vec<Vec3>,
+            arrival: Vec<Vec3>,
+            energy: Vec<Vec3>,
+        }
+        let walked: Vec<Option<Walked>> = lights
+            .par_iter()
+            .enumerate()
+            .map(|(i, light)| {
+                if cancel.load(Ordering::Relaxed) {
+                    return None;
+                }
+                let mut rng = Rng::for_sample(params.seed, i as u32, WALK_PASS);
+                let x = light.position;
+                // Light arriving from each external light.
+                let mut arrival = Vec::with_capacity(n_ext);
+                external.for_each_at(x, |l| {
+                    let mut t = Vec3::ZERO;
+                    for _ in 0..tr_estimates {
+                        t += transmittance(vol, x, -l.travel, l.distance, &mut rng);
+                    }
+                    arrival.push(l.irradiance * t / tr_estimates as f32);
+                });
+                let mut f = vec![Vec3::ZERO; count];
+                let mut multi = vec![Vec3::ZERO; count];
+                let mut energy = vec![Vec3::ZERO; terms + 1];
+                // k = 0: ∫ S₁ dn = b Σ T E, since the phase function is
+                // normalised.
+                energy[0] = light.weight * light.density * scatter * arrival.iter().sum::<Vec3>();
+                let mut per_walk = vec![Vec3::ZERO; terms + 1];
+                let mut y = [0.0f32; MAX_COUNT];
+                let w_dir = 4.0 * std::f32::consts::PI / walks as f32;
+                // Stratified directions: a spherical Fibonacci lattice of
+                // `walks` points under a uniformly random rotation (each
+                // direction is still uniform, so the projection stays
+                // unbiased, but the set covers the sphere evenly).
+                let rotation = random_rotation(&mut rng);
+                let phi0 = 2.0 * std::f32::consts::PI * rng.next_f32();
+                for w in 0..walks {
+                    let z = 1.0 - (2 * w + 1) as f32 / walks as f32;
+                    let phi = phi0 + w as f32 * GOLDEN_ANGLE;
+                    let s = (1.0 - z * z).max(0.0).sqrt();
+                    let n = rotation * Vec3::new(s * phi.cos(), s * phi.sin(), z);
+                    per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                    accumulate_j_from(vol, external, x, n, &gate, 1, &mut rng, &mut per_walk);
+                    let total: Vec3 = per_walk[1..].iter().sum();
+                    if total == Vec3::ZERO {
+                        continue;
+                    }
+                    let first = per_walk.get(1).copied().unwrap_or(Vec3::ZERO);
+                    sh_basis(order, n, &mut y);
+                    for c in 0..count {
+                        multi[c] += total * (y[c] * w_dir);
+                        f[c] += first * (y[c] * w_dir);
+                    }
+                    for k in 1..=terms {
+                        energy[k] += per_walk[k] * (light.weight * w_dir);
+                    }
+                }
+                Some(Walked {
+                    f,
+                    multi,
+                    arrival,
+                    energy,
+                })
+            })
+            .collect();
+        if cancel.load(Ordering::Relaxed) {
+            return None;
+        }
+        let mut f_coeffs = Vec::with_capacity(m * count);
+        let mut multi_coeffs = Vec::with_capacity(m * count);
+        let mut arrival = Vec::with_capacity(m * n_ext);
+        let mut term_energy = vec![Vec3::ZERO; terms + 1];
+        for w in walked.into_iter().flatten() {
+            f_coeffs.extend_from_slice(&w.f);
+            multi_coeffs.extend_from_slice(&w.multi);
+            arrival.extend_from_slice(&w.arrival);
+            for (e, v) in term_energy.iter_mut().zip(&w.energy) {
+                *e += *v;
+            }
+        }
+        let t_walk = start.elapsed().as_secs_f64();
+
+        let mut out = Self::assemble(
+            vol,
+            external,
+            params,
+            lights,
+            f_coeffs,
+            multi_coeffs,
+            arrival,
+            term_energy,
+            placement.density_integral,
+        );
+        out.timings.placement = t_place;
+        out.timings.walks = t_walk;
+        Some(out)
+    }
+
+    /// Builds the kernel radius and the spatial indices around lights whose
+    /// sources are known: `f_coeffs` and `multi_coeffs` hold
+    /// `(sh_order+1)²` SH coefficients per light, `arrival` the light
+    /// arriving from each external light (in `external`'s order, suns
+    /// first). [`InternalLights::build`] calls this after the walks; tests
+    /// call it with sources of their own.
+    #[allow(clippy::too_many_arguments)] // the parts of the cache
+    pub fn assemble<D: DensityField>(
+        vol: &Volume<D>,
+        external: &Lights,
+        params: &InternalParams,
+        lights: Vec<InternalLight>,
+        f_coeffs: Vec<Vec3>,
+        multi_coeffs: Vec<Vec3>,
+        arrival: Vec<Vec3>,
+        term_energy: Vec<Vec3>,
+        density_integral: f32,
+    ) -> Self {
+        let start = Instant::now();
+        let m = lights.len().max(1);
+        let order = params.sh_order.min(MAX_ORDER);
+        let count = sh_count(order);
+        let scatter = vol.optics.albedo * vol.optics.sigma_t;
+        let kernel_radius = params.kernel_radius.unwrap_or_else(|| {
+            let mut v: Vec<f32> = lights
+                .iter()
+                .map(|l| l.weight)
+                .filter(|w| *w > 0.0)
+                .collect();
+            let mid = v.len() / 2;
+            let median = if v.is_empty() {
+                let (lo, hi) = vol.bounds;
+                let s = hi - lo;
+                s.x * s.y * s.z / m as f32
+            } else {
+                *v.select_nth_unstable_by(mid, f32::total_cmp).1
+            };
+            AUTO_KERNEL_FACTOR * median.cbrt()
+        });
+        let sigma_grey = vol.optics.sigma_t.max_element();
+        let recon_scale: Vec<f32> = lights
+            .iter()
+            .map(|l| match params.clock {
+                Clock::Geometric => 1.0,
+                Clock::OpticalDepth => {
+                    let c = sigma_grey * l.density;
+                    if c > 0.0 {
+                        1.0 / c
+                    } else {
+                        0.0
+                    }
+                }
+            })
+            .collect();
+        let positions: Vec<Vec3> = lights.iter().map(|l| l.position).collect();
+        let fine = LightGrid::build(
+            &positions,
+            |i| recon_scale[i] > 0.0,
+            vol.bounds,
+            kernel_radius,
+            96,
+        );
+        let mut out = Self {
+            params: *params,
+            s_star: params.s_star,
+            kernel_radius,
+            softening: kernel_radius * L1_SOFTENING,
+            lights,
+            term_energy,
+            density_integral,
+            timings: BuildTimings::default(),
+            sh_order: order,
+            sh_count: count,
+            f_coeffs,
+            multi_coeffs,
+            arrival,
+            external: external.clone(),
+            scatter,
+            g: vol.optics.g,
+            recon_scale,
+            fine,
+            clusters: LightGrid::build(&[], |_| false, vol.bounds, 1.0, 1),
+            cluster_power: Vec::new(),
+            light_power: Vec::new(),
+            live_clusters: Vec::new(),
+            sigma_grey,
+        };
+        out.build_clusters(vol.bounds, &positions);
+        out.timings.index = start.elapsed().as_secs_f64();
+        out
+    }
+
+    /// The cluster grid and the power tables of the light selection.
+    fn build_clusters(&mut self, bounds: (Vec3, Vec3), positions: &[Vec3]) {
+        let power: Vec<f32> = (0..self.lights.len())
+            .map(|i| {
+                let j = self.mean_j(i);
+                self.lights[i].weight * (j.x + j.y + j.z)
+            })
+            .collect();
+        let (lo, hi) = bounds;
+        let size = hi - lo;
+        let volume = (size.x * size.y * size.z).max(1e-30);
+        let clusters_wanted = (self.lights.len() as f32 / LIGHTS_PER_CLUSTER).max(1.0);
+        let cell = (volume / clusters_wanted).cbrt();
+        let clusters = LightGrid::build(
+            positions,
+            |i| power[i] > 0.0 && power[i].is_finite(),
+            bounds,
+            cell,
+            MAX_CLUSTER_RES,
+        );
+        let mut cluster_power = vec![0.0f32; clusters.cell_count()];
+        let light_power: Vec<f32> = clusters.ids().iter().map(|&i| power[i as usize]).collect();
+        let mut live = Vec::new();
+        for (c, p) in cluster_power.iter_mut().enumerate() {
+            *p = light_power[clusters.cell_range(c)].iter().sum();
+            if *p > 0.0 {
+                live.push(c as u32);
+            }
+        }
+        self.clusters = clusters;
+        self.cluster_power = cluster_power;
+        self.light_power = light_power;
+        self.live_clusters = live;
+    }
+
+    /// Number of lights.
+    pub fn len(&self) -> usize {
+        self.lights.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.lights.is_empty()
+    }
+
+    /// The SH order of `F` and of `J`'s multiply scattered part.
+    pub fn sh_order(&self) -> u32 {
+        self.sh_order
+    }
+
+    /// `S₁(x_i, n)`: the single-scatter source at light `i` towards `n`
+    /// (the direction light travels after scattering), exact in angle.
+    pub fn eval_s1(&self, i: usize, n: Vec3) -> Vec3 {
+        let light = &self.lights[i];
+        let n_ext = self.arrival.len() / self.lights.len().max(1);
+        let arrival = &self.arrival[i * n_ext..(i + 1) * n_ext];
+        let mut sum = Vec3::ZERO;
+        let mut l = 0;
+        self.external.for_each_at(light.position, |s| {
+            sum += arrival[l] * phase::hg(self.g, s.travel.dot(n));
+            l += 1;
+        });
+        sum * self.scatter * light.density
+    }
+
+    fn eval_sh(coeffs: &[Vec3], y: &[f32]) -> Vec3 {
+        coeffs
+            .iter()
+            .zip(y)
+            .fold(Vec3::ZERO, |acc, (&c, &yi)| acc + c * yi)
+    }
+
+    /// `F_i(n) = J_1(x_i, n)`, the note's internal light source, from its
+    /// SH coefficients (clamped at zero).
+    pub fn eval_f(&self, i: usize, n: Vec3) -> Vec3 {
+        let mut y = [0.0f32; MAX_COUNT];
+        sh_basis(self.sh_order, n, &mut y);
+        let c = &self.f_coeffs[i * self.sh_count..(i + 1) * self.sh_count];
+        Self::eval_sh(c, &y).max(Vec3::ZERO)
+    }
+
+    /// `Σ_{k≥1} J_k(x_i, n)` from its SH coefficients, with the basis
+    /// `y` of `n` already evaluated (clamped at zero).
+    #[inline]
+    pub(crate) fn eval_multi_with(&self, i: usize, y: &[f32]) -> Vec3 {
+        let c = &self.multi_coeffs[i * self.sh_count..(i + 1) * self.sh_count];
+        Self::eval_sh(c, y).max(Vec3::ZERO)
+    }
+
+    /// `J_i(n) = S₁(x_i, n) + Σ_{k≥1} J_k(x_i, n)`.
+    pub fn eval_j(&self, i: usize, n: Vec3) -> Vec3 {
+        let mut y = [0.0f32; MAX_COUNT];
+        sh_basis(self.sh_order, n, &mut y);
+        self.eval_s1(i, n) + self.eval_multi_with(i, &y)
+    }
+
+    /// The mean of `F_i` over directions, `∫F_i dn / 4π`.
+    pub fn mean_f(&self, i: usize) -> Vec3 {
+        self.f_coeffs[i * self.sh_count] * Y00
+    }
+
+    /// The mean of `J_i` over directions, `∫J_i dn / 4π`.
+    pub fn mean_j(&self, i: usize) -> Vec3 {
+        let n_ext = self.arrival.len() / self.lights.len().max(1);
+        let s1: Vec3 = self.arrival[i * n_ext..(i + 1) * n_ext]
+            .iter()
+            .sum::<Vec3>()
+            * self.scatter
+            * self.lights[i].density
+            / (4.0 * std::f32::consts::PI);
+        s1 + self.multi_coeffs[i * self.sh_count] * Y00
+    }
+
+    /// The kernel reconstruction of the multiply scattered part of `J` at
+    /// `p` towards `n` (METHOD.md §6): `Σ K_h J_i / Σ K_h` over the lights
+    /// within `h`, with `K_h(r) = (1 − r²/h²)²`; for the optical-depth clock
+    /// the average is taken of `J_i / c_g(x_i)` and multiplied by `c_g(p)`.
+    /// Zero where no light is within `h`.
+    pub fn reconstruct_multi(&self, p: Vec3, n: Vec3, density_at_p: f32) -> Vec3 {
+        let scale_p = self.reconstruction_scale(density_at_p);
+        if scale_p <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let mut y = [0.0f32; MAX_COUNT];
+        sh_basis(self.sh_order, n, &mut y);
+        let mut num = Vec3::ZERO;
+        let mut den = 0.0f32;
+        self.for_each_kernel_weight(p, |i, k| {
+            num += self.eval_multi_with(i, &y) * (k * self.recon_scale[i]);
+            den += k;
+        });
+        if den > 0.0 {
+            num * (scale_p / den)
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// The factor that turns the kernel average back into `Ĵ` at a point of
+    /// density `density_at_p`: 1, or `c_g(p)` for the optical-depth clock.
+    #[inline]
+    pub(crate) fn reconstruction_scale(&self, density_at_p: f32) -> f32 {
+        match self.params.clock {
+            Clock::Geometric => 1.0,
+            Clock::OpticalDepth => self.sigma_grey * density_at_p,
+        }
+    }
+
+    /// Calls `f(i, K_h(p − x_i))` for every light of the reconstruction
+    /// within `h` of `p`, `K_h(r) = (1 − r²/h²)²`.
+    #[inline]
+    pub(crate) fn for_each_kernel_weight(&self, p: Vec3, mut f: impl FnMut(usize, f32)) {
+        let h = self.kernel_radius;
+        let inv_h2 = 1.0 / (h * h);
+        self.fine.for_each_near(p, h, |i| {
+            let i = i as usize;
+            let q = (self.lights[i].position - p).length_squared() * inv_h2;
+            if q < 1.0 {
+                f(i, (1.0 - q) * (1.0 - q));
+            }
+        });
+    }
+}
+
+/// `π (3 − √5)`, the golden angle of the spherical Fibonacci lattice.
+const GOLDEN_ANGLE: f32 = 2.399_963;
+
+/// A uniformly random rotation (Shoemake's uniform unit quaternion).
+fn random_rotation(rng: &mut Rng) -> glam::Quat {
+    let (u1, u2, u3) = (rng.next_f32(), rng.next_f32(), rng.next_f32());
+    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+    let tau = 2.0 * std::f32::consts::PI;
+    glam::Quat::from_xyzw(
+        a * (tau * u2).sin(),
+        a * (tau * u2).cos(),
+        b * (tau * u3).sin(),
+        b * (tau * u3).cos(),
+    )
+    .normalize()
+}
+
+/// `Y₀₀ = 1 / (2√π)`.
+const Y00: f32 = 0.282_094_8;
