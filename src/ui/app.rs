@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use eframe::egui;
 use serde::{Deserialize, Serialize};
 
-use super::backend::{Estimator, Job, Worker, HAS_INTERNAL};
+use super::backend::{Estimator, Job, Worker};
 use super::files::{self, Loaded};
 use super::viewport::{Display, NavState};
 use super::LaunchOptions;
@@ -523,10 +523,7 @@ impl LanternApp {
         let mut scene = self.doc.scene.clone();
         scene.camera.width = self.render_size[0].max(1);
         scene.camera.height = self.render_size[1].max(1);
-        let mut estimators = self.session.compare.estimators();
-        if !HAS_INTERNAL {
-            estimators.dedup();
-        }
+        let estimators = self.session.compare.estimators();
         Job {
             scene,
             scene_dir: self.scene_dir.clone(),

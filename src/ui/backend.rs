@@ -40,9 +40,6 @@ pub enum Estimator {
     Reference = 1,
 }
 
-/// Whether this build has the internal-lights renderer.
-pub const HAS_INTERNAL: bool = true;
-
 /// Everything that determines the picture.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Job {

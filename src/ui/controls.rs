@@ -11,7 +11,7 @@ use egui_plot::{Bar, BarChart, Plot};
 use glam::Vec3;
 
 use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
-use super::backend::{ClockKind, HAS_INTERNAL};
+use super::backend::ClockKind;
 use crate::render::tonemap::ViewTransform;
 use crate::scene::{Light, Method};
 
@@ -32,15 +32,6 @@ pub const DENSITY_SCALE: &str = "density scale";
 pub fn panel_ui(ui: &mut Ui, app: &mut LanternApp) {
     egui::ScrollArea::vertical().show(ui, |ui| {
         ui.heading("Internal lights");
-        if !HAS_INTERNAL {
-            ui.label(
-                egui::RichText::new(
-                    "This build has no internal-lights renderer yet: every view shows the reference.",
-                )
-                .small()
-                .weak(),
-            );
-        }
         method_knobs_ui(ui, app);
         ui.add_space(6.0);
         egui::CollapsingHeader::new("Medium")
