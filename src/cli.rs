@@ -17,7 +17,7 @@ use crate::cpu::Renderer;
 use crate::render::export::write_image;
 use crate::render::tonemap::ViewTransform;
 use crate::render::{Film, Prepared};
-use crate::scene::{ClockKind, InternalSettings, Method, Scene};
+use crate::scene::{ClockKind, InternalSettings, L1Kind, Method, Scene};
 
 /// Lantern: multiple scattering as internal lights, live.
 #[derive(Debug, Parser)]
@@ -55,6 +55,24 @@ impl From<ClockArg> for ClockKind {
     }
 }
 
+/// Forms of the gather's L1 on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum L1Arg {
+    /// One scattering of the reconstructed field J (default).
+    Field,
+    /// The note's sum over point lights with a bounded kernel.
+    Points,
+}
+
+impl From<L1Arg> for L1Kind {
+    fn from(c: L1Arg) -> Self {
+        match c {
+            L1Arg::Field => L1Kind::Field,
+            L1Arg::Points => L1Kind::Points,
+        }
+    }
+}
+
 /// Overrides of the internal-lights parameters (default: the scene's).
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct InternalArgs {
@@ -82,6 +100,9 @@ pub struct InternalArgs {
     /// What the path-length clock counts.
     #[arg(long, value_enum)]
     pub clock: Option<ClockArg>,
+    /// The form of the gather's L1 (single scatter of the internal lights).
+    #[arg(long, value_enum)]
+    pub l1: Option<L1Arg>,
     /// Internal-light samples per camera sample.
     #[arg(long)]
     pub light_samples: Option<u32>,
@@ -113,6 +134,9 @@ impl InternalArgs {
         }
         if let Some(v) = self.clock {
             settings.clock = v.into();
+        }
+        if let Some(v) = self.l1 {
+            settings.l1 = v.into();
         }
         if let Some(v) = self.light_samples {
             settings.light_samples = v;

@@ -57,6 +57,18 @@ const LIGHTS_PER_CLUSTER: f32 = 24.0;
 /// Most clusters along an axis.
 const MAX_CLUSTER_RES: u32 = 12;
 
+/// The form of the final gather's `L₁` (see [`super::gather`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum L1Form {
+    /// One scattering of the reconstructed field `J = S₁ + Ĵ`: no bounded
+    /// kernel, so no softening bias.
+    #[default]
+    Field,
+    /// The note's sum over the point lights with the bounded kernel
+    /// `1/(r² + h₁²)`.
+    Points,
+}
+
 /// Parameters of the internal lights, resolved (no defaults left open).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct InternalParams {
@@ -78,6 +90,8 @@ pub struct InternalParams {
     pub uniform_mix: f32,
     /// The path-length clock.
     pub clock: Clock,
+    /// The form of the gather's `L₁`.
+    pub l1: L1Form,
     /// Seed of the placement and the walks.
     pub seed: u64,
 }
@@ -536,12 +550,18 @@ impl InternalLights {
         sh_basis(self.sh_order, n, &mut y);
         let mut num = Vec3::ZERO;
         let mut den = 0.0f32;
+        // The lights' SH series are summed unclamped and the average is
+        // clamped: clamping each light's noisy series at zero would bias
+        // the average upwards wherever `J` is small (measured on the
+        // forward-scattering puffs at K = 128: +6.8 % clamped per light,
+        // +4.5 % clamped after the sum).
         self.for_each_kernel_weight(p, |i, k| {
-            num += self.eval_multi_with(i, &y) * (k * self.recon_scale[i]);
+            let c = &self.multi_coeffs[i * self.sh_count..(i + 1) * self.sh_count];
+            num += Self::eval_sh(c, &y) * (k * self.recon_scale[i]);
             den += k;
         });
         if den > 0.0 {
-            num * (scale_p / den)
+            (num * (scale_p / den)).max(Vec3::ZERO)
         } else {
             Vec3::ZERO
         }

@@ -6,10 +6,12 @@ use std::path::Path;
 use glam::Vec3;
 
 use crate::physics::gated_walk::Clock;
-use crate::physics::internal::InternalParams;
+use crate::physics::internal::{InternalParams, L1Form};
 use crate::physics::lights::{Lights, PointLight, Sun};
 use crate::physics::volume::{DensityField, Optics, Volume};
-use crate::scene::{CameraFrame, ClockKind, Density, Light, RenderSettings, Scene, SceneError};
+use crate::scene::{
+    CameraFrame, ClockKind, Density, L1Kind, Light, RenderSettings, Scene, SceneError,
+};
 
 /// Majorant cells along the longest axis of the medium's box.
 pub const MAJORANT_CELLS: u32 = 32;
@@ -116,6 +118,10 @@ pub fn internal_params(prepared: &Prepared, settings: &RenderSettings) -> Intern
         kernel_radius: s.kernel_radius,
         uniform_mix: s.uniform_mix,
         clock,
+        l1: match s.l1 {
+            L1Kind::Field => L1Form::Field,
+            L1Kind::Points => L1Form::Points,
+        },
         seed: settings.seed,
     }
 }

@@ -26,6 +26,19 @@ pub enum ClockKind {
     OpticalDepth,
 }
 
+/// The form of the final gather's single-scatter term `L₁` (METHOD.md §6;
+/// the README's "The internal-lights renderer" says how they differ).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum L1Kind {
+    /// One scattering of the kernel-reconstructed field `J` (no bounded
+    /// kernel, no softening bias).
+    #[default]
+    Field,
+    /// Tessendorf's sum over the point lights with the bounded kernel
+    /// `1/(r² + h₁²)`.
+    Points,
+}
+
 /// Parameters of the internal-lights method. Changing any of them
 /// re-samples the internal lights.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -50,6 +63,8 @@ pub struct InternalSettings {
     pub uniform_mix: f32,
     /// What the path-length clock counts.
     pub clock: ClockKind,
+    /// The form of the gather's `L₁`.
+    pub l1: L1Kind,
     /// Internal-light samples per camera sample in the final gather.
     pub light_samples: u32,
 }
@@ -65,6 +80,7 @@ impl Default for InternalSettings {
             kernel_radius: None,
             uniform_mix: 0.0,
             clock: ClockKind::OpticalDepth,
+            l1: L1Kind::Field,
             light_samples: 2,
         }
     }

@@ -13,6 +13,7 @@ use glam::Vec3;
 use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
 use super::backend::ClockKind;
 use crate::render::tonemap::ViewTransform;
+use crate::scene::L1Kind;
 use crate::scene::{Light, Method};
 
 /// Label of the window-length slider (tests find widgets by label).
@@ -225,6 +226,23 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
             "What the path-length clock counts. Optical depth: s* in mean free \
              paths, so every window holds about s* collisions in thin and thick \
              parts alike. Geometric: s* is a distance, as in Tessendorf's note.",
+        );
+    egui::ComboBox::from_label("L₁ form")
+        .selected_text(match s.l1 {
+            L1Kind::Field => "field",
+            L1Kind::Points => "point lights",
+        })
+        .show_ui(ui, |ui| {
+            ui.selectable_value(&mut s.l1, L1Kind::Field, "field");
+            ui.selectable_value(&mut s.l1, L1Kind::Points, "point lights");
+        })
+        .response
+        .on_hover_text(
+            "How the last scattering inside the window is gathered. Field: from the \
+             smooth J reconstructed around the lights (no softening, least bias). \
+             Point lights: from each internal light as a softened point source, as \
+             in Tessendorf's note; sparkles near lights and darkens dense media at \
+             small s*.",
         );
     ui.add(Slider::new(&mut s.light_samples, 1..=64).text("light samples"))
         .on_hover_text(
