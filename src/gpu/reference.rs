@@ -336,8 +336,10 @@ impl ReferenceRenderer {
         self.ctx.wait_idle()
     }
 
-    /// Clears the accumulation (a new render with the same scene).
-    pub fn reset(&mut self) {
+    /// Clears the accumulation and selects new random streams with `seed`
+    /// (a new render of the same scene).
+    pub fn reset(&mut self, seed: u64) {
+        self.seed = seed;
         let mut encoder = self
             .ctx
             .device
