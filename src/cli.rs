@@ -15,7 +15,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cpu::Renderer;
-use crate::gpu::{GpuContext, ReferenceRenderer};
+use crate::gpu::{GpuContext, GpuRenderer};
 use crate::render::export::write_image;
 use crate::render::film::image_mean;
 use crate::render::tonemap::ViewTransform;
@@ -495,7 +495,7 @@ fn render_gpu(
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let ctx = gpu_context()?;
     let t_build = Instant::now();
-    let mut renderer = ReferenceRenderer::new(&ctx, prepared, settings.seed)?;
+    let mut renderer = GpuRenderer::reference(&ctx, prepared, settings.seed)?;
     renderer.finish()?;
     let build_secs = t_build.elapsed().as_secs_f64();
     let bar = pass_bar(settings.spp);
@@ -542,7 +542,7 @@ fn render_gpu(
 /// time and the median render time.
 fn bench_gpu(ctx: &GpuContext, prepared: &Prepared, spp: u32, repeats: u32) -> Result<(f64, f64)> {
     let start = Instant::now();
-    let mut renderer = ReferenceRenderer::new(ctx, prepared, 0)?;
+    let mut renderer = GpuRenderer::reference(ctx, prepared, 0)?;
     renderer.finish()?;
     let build = start.elapsed().as_secs_f64();
     // One untimed pass: the first dispatch may still compile or page in.

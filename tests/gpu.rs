@@ -9,6 +9,9 @@
 //!   per channel within 4 standard errors of their difference, and a
 //!   per-pixel z-test (|z| < 3) passing for at least 97 % of pixel channels.
 //!   Independent seeds on the two sides, so that their noise is independent.
+//! - With an adapter: the internal-lights gather on the GPU agrees in the
+//!   same way with the CPU gather using the same lights (built once on the
+//!   CPU) on the thin sphere (both clocks) and the chromatic sphere.
 //!
 //! Without an adapter the GPU cases print a notice and pass, unless
 //! `LANTERN_REQUIRE_GPU=1` (set in CI, where lavapipe provides one).
@@ -16,14 +19,21 @@
 mod common;
 
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Instant;
 
 use glam::Vec3;
-use lantern::gpu::mirrors::{GpuAccum, GpuCamera, GpuLight, GpuMedium, GpuPassParams, GpuScene};
+use lantern::cpu::Renderer;
+use lantern::gpu::mirrors::{
+    GpuAccum, GpuCamera, GpuGatherParams, GpuLight, GpuMedium, GpuPassParams, GpuScene,
+};
 use lantern::gpu::shaders::{ModuleSource, MODULES};
-use lantern::gpu::{GpuContext, ReferenceRenderer};
+use lantern::gpu::{GpuContext, GpuImage, GpuRenderer};
+use lantern::physics::internal::InternalLights;
 use lantern::render::film::image_mean;
-use lantern::render::Film;
-use lantern::scene::Method;
+use lantern::render::{internal_params, Film, Prepared};
+use lantern::scene::{ClockKind, Method};
 
 /// Parses and validates one assembled module, naming the file and line of
 /// the first error.
@@ -182,6 +192,44 @@ fn mirrors_match_wgsl_layout() {
     );
     check_layout!(&module, "Light", GpuLight, [vector, kind, power, _pad0]);
     check_layout!(&module, "Accum", GpuAccum, [mean, m2, single_mean]);
+    let (module, _) = validate(&lantern::gpu::shaders::GATHER_MODULE);
+    check_layout!(
+        &module,
+        "GatherParams",
+        GpuGatherParams,
+        [
+            scatter,
+            g,
+            fine_min,
+            s_star,
+            fine_cell,
+            kernel_radius,
+            fine_res,
+            softening,
+            cluster_min,
+            sigma_grey,
+            cluster_cell,
+            clock,
+            cluster_res,
+            sh_order,
+            sh_count,
+            light_count,
+            external_count,
+            light_samples,
+            lights_offset,
+            multi_offset,
+            arrival_offset,
+            live_count,
+            fine_starts_offset,
+            fine_ids_offset,
+            cluster_starts_offset,
+            cluster_ids_offset,
+            cluster_power_offset,
+            light_power_offset,
+            live_offset,
+            _pad0
+        ]
+    );
 }
 
 /// A GPU context, or `None` (with a notice) where there is no adapter;
@@ -223,27 +271,11 @@ fn variance_of_image_mean(film: &Film) -> Vec3 {
     v.iter().copied().sum::<Vec3>() / (n * n)
 }
 
-/// Renders `scene` at `side`² with `spp` on both backends and compares.
-fn agree(scene: &str, side: u32, spp: u32) {
-    let Some(ctx) = gpu() else { return };
-    let prepared = std::sync::Arc::new(common::prepare_with(scene, |s| {
-        s.camera.width = side;
-        s.camera.height = side;
-    }));
-    let t = std::time::Instant::now();
-    let cpu = common::render(&prepared, Method::Reference, 1, spp);
-    let cpu_secs = t.elapsed().as_secs_f64();
-    let t = std::time::Instant::now();
-    let mut renderer =
-        ReferenceRenderer::new(&ctx, &prepared, 2).unwrap_or_else(|e| panic!("{e:#}"));
-    for pass in 0..spp {
-        renderer.add_pass(pass);
-    }
-    let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
-    let gpu_secs = t.elapsed().as_secs_f64();
-    assert_eq!(image.samples, spp);
+/// Compares a GPU image with a CPU film of the same scene (independent
+/// seeds): image means per channel within 4σ of their difference and
+/// |z| < 3 for at least 97 % of pixel channels; dumps both on failure.
+fn compare_backends(label: &str, image: &GpuImage, cpu: &Film, timing: &str) {
     let gpu = image.film();
-
     let (a, b) = (gpu.mean(), cpu.mean());
     let cmp = common::compare(
         &a,
@@ -252,13 +284,12 @@ fn agree(scene: &str, side: u32, spp: u32) {
         &cpu.variance_of_mean(),
         3.0,
     );
-    let sigma = (variance_of_image_mean(&gpu) + variance_of_image_mean(&cpu)).powf(0.5);
+    let sigma = (variance_of_image_mean(&gpu) + variance_of_image_mean(cpu)).powf(0.5);
     let diff = cmp.mean_a - cmp.mean_b;
     let z_means = diff / sigma.max(Vec3::splat(1e-12));
-    // The single-scattering parts are estimated too; their means agree.
     let single_gpu = image_mean(&image.single_mean());
     println!(
-        "{scene} {side}²×{spp} spp: GPU mean {:.5?} CPU mean {:.5?} (Δ/σ {:.2?}); GPU single {:.5?}; per-pixel |z|<3: {:.4}; CPU {cpu_secs:.2} s, GPU {gpu_secs:.2} s",
+        "{label}: GPU mean {:.5?} CPU mean {:.5?} (Δ/σ {:.2?}); GPU single {:.5?}; per-pixel |z|<3: {:.4}; {timing}",
         cmp.mean_a.to_array(),
         cmp.mean_b.to_array(),
         z_means.to_array(),
@@ -267,19 +298,98 @@ fn agree(scene: &str, side: u32, spp: u32) {
     );
     let ok = z_means.abs().max_element() < 4.0 && cmp.z_pass_fraction >= 0.97;
     if !ok {
-        let name = Path::new(scene)
-            .file_stem()
-            .unwrap()
-            .to_string_lossy()
-            .to_string();
-        let pa = common::dump(&format!("{name}_gpu"), side, side, &a);
-        let pb = common::dump(&format!("{name}_cpu"), side, side, &b);
+        let name = label.replace(['/', ' ', '²', '×'], "_");
+        let pa = common::dump(&format!("{name}_gpu"), image.width, image.height, &a);
+        let pb = common::dump(&format!("{name}_cpu"), image.width, image.height, &b);
         panic!(
-            "{scene}: GPU and CPU disagree: {cmp:?}, Δ/σ {z_means}; images in {} and {}",
+            "{label}: GPU and CPU disagree: {cmp:?}, Δ/σ {z_means}; images in {} and {}",
             pa.display(),
             pb.display()
         );
     }
+}
+
+/// The scene at `side`², prepared.
+fn prepare_small(scene: &str, side: u32) -> Arc<Prepared> {
+    Arc::new(common::prepare_with(scene, |s| {
+        s.camera.width = side;
+        s.camera.height = side;
+    }))
+}
+
+/// Renders `scene` at `side`² with `spp` with the reference method on both
+/// backends and compares.
+fn agree(scene: &str, side: u32, spp: u32) {
+    let Some(ctx) = gpu() else { return };
+    let prepared = prepare_small(scene, side);
+    let t = Instant::now();
+    let cpu = common::render(&prepared, Method::Reference, 1, spp);
+    let cpu_secs = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let mut renderer =
+        GpuRenderer::reference(&ctx, &prepared, 2).unwrap_or_else(|e| panic!("{e:#}"));
+    for pass in 0..spp {
+        renderer.add_pass(pass);
+    }
+    let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+    let gpu_secs = t.elapsed().as_secs_f64();
+    assert_eq!(image.samples, spp);
+    compare_backends(
+        &format!("{scene} reference {side}²×{spp} spp"),
+        &image,
+        &cpu,
+        &format!("CPU {cpu_secs:.2} s, GPU {gpu_secs:.2} s"),
+    );
+}
+
+/// Builds the internal lights once on the CPU (the scene's settings, with
+/// `clock`), then gathers with them at `side`² with `spp` on both backends
+/// and compares.
+fn agree_gather(scene: &str, clock: ClockKind, side: u32, spp: u32) {
+    let Some(ctx) = gpu() else { return };
+    let prepared = prepare_small(scene, side);
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    settings.internal.clock = clock;
+    let never = AtomicBool::new(false);
+    let t = Instant::now();
+    let cache = Arc::new(
+        InternalLights::build(
+            &prepared.volume,
+            &prepared.lights,
+            &internal_params(&prepared, &settings),
+            &never,
+        )
+        .unwrap(),
+    );
+    let build_secs = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    settings.seed = 1;
+    let cpu_renderer = Renderer::with_lights(prepared.clone(), &settings, Some(cache.clone()));
+    let mut cpu = Film::new(side, side);
+    for pass in 0..spp {
+        cpu.add_pass(&cpu_renderer.pass(pass, &never).unwrap().total);
+    }
+    let cpu_secs = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let mut renderer =
+        GpuRenderer::internal(&ctx, &prepared, &cache, settings.internal.light_samples, 2)
+            .unwrap_or_else(|e| panic!("{e:#}"));
+    for pass in 0..spp {
+        renderer.add_pass(pass);
+    }
+    let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+    let gpu_secs = t.elapsed().as_secs_f64();
+    compare_backends(
+        &format!(
+            "{scene} internal-lights gather (M = {}, {:?} clock) {side}²×{spp} spp",
+            cache.len(),
+            cache.params.clock
+        ),
+        &image,
+        &cpu,
+        &format!("lights built in {build_secs:.2} s; CPU {cpu_secs:.2} s, GPU {gpu_secs:.2} s"),
+    );
 }
 
 #[test]
@@ -295,4 +405,34 @@ fn reference_agrees_chromatic_sphere() {
 #[test]
 fn reference_agrees_puffs_grid() {
     agree("assets/scenes/puffs_grid.ron", 24, 512);
+}
+
+#[test]
+fn gather_agrees_thin_sphere() {
+    agree_gather(
+        "assets/scenes/thin_sphere.ron",
+        ClockKind::OpticalDepth,
+        24,
+        256,
+    );
+}
+
+#[test]
+fn gather_agrees_thin_sphere_geometric_clock() {
+    agree_gather(
+        "assets/scenes/thin_sphere.ron",
+        ClockKind::Geometric,
+        24,
+        128,
+    );
+}
+
+#[test]
+fn gather_agrees_chromatic_sphere() {
+    agree_gather(
+        "assets/scenes/chromatic_sphere.ron",
+        ClockKind::OpticalDepth,
+        24,
+        256,
+    );
 }

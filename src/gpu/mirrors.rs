@@ -153,6 +153,81 @@ pub struct GpuLight {
 }
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 
+/// Clock tags (keep in sync with `CLOCK_*` in
+/// `shaders/common/internal_data.wgsl`).
+pub const CLOCK_GEOMETRIC: u32 = 0;
+/// The optical-depth clock.
+pub const CLOCK_OPTICAL_DEPTH: u32 = 1;
+
+/// Constants of the cached internal lights and the offsets of their tables
+/// in the two packed buffers (see `gpu::gather`). Keep in sync with
+/// `GatherParams` in `shaders/common/internal_data.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuGatherParams {
+    /// `α σ_t` per unit density.
+    pub scatter: [f32; 3],
+    /// Henyey–Greenstein asymmetry.
+    pub g: f32,
+    /// Fine light grid: minimum corner.
+    pub fine_min: [f32; 3],
+    /// Window length `s*`.
+    pub s_star: f32,
+    /// Fine light grid: cell size.
+    pub fine_cell: [f32; 3],
+    /// Reconstruction kernel radius `h`.
+    pub kernel_radius: f32,
+    /// Fine light grid: cells per axis.
+    pub fine_res: [u32; 3],
+    /// `L₁`'s kernel softening `h₁`.
+    pub softening: f32,
+    /// Cluster grid: minimum corner.
+    pub cluster_min: [f32; 3],
+    /// `max(σ_t)`.
+    pub sigma_grey: f32,
+    /// Cluster grid: cell size.
+    pub cluster_cell: [f32; 3],
+    /// One of `CLOCK_*`.
+    pub clock: u32,
+    /// Cluster grid: cells per axis.
+    pub cluster_res: [u32; 3],
+    /// SH order.
+    pub sh_order: u32,
+    /// SH coefficients per light.
+    pub sh_count: u32,
+    /// Number of internal lights.
+    pub light_count: u32,
+    /// Arriving lights stored per internal light.
+    pub external_count: u32,
+    /// Internal-light samples per camera sample.
+    pub light_samples: u32,
+    /// Vec4 table offsets: lights, SH coefficients, arriving light.
+    pub lights_offset: u32,
+    /// See `lights_offset`.
+    pub multi_offset: u32,
+    /// See `lights_offset`.
+    pub arrival_offset: u32,
+    /// Number of live clusters.
+    pub live_count: u32,
+    /// Word table offsets: fine grid starts.
+    pub fine_starts_offset: u32,
+    /// Fine grid ids.
+    pub fine_ids_offset: u32,
+    /// Cluster grid starts.
+    pub cluster_starts_offset: u32,
+    /// Cluster grid ids.
+    pub cluster_ids_offset: u32,
+    /// Cluster powers (f32 bits).
+    pub cluster_power_offset: u32,
+    /// Per-slot light powers (f32 bits).
+    pub light_power_offset: u32,
+    /// Live clusters.
+    pub live_offset: u32,
+    /// Padding.
+    pub _pad0: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 176);
+
 /// One pixel's running statistics on the GPU: Welford mean and sum of
 /// squared deviations of the estimate, and the mean of its single-scattering
 /// part (`w` unused). Keep in sync with `Accum` in

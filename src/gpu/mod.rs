@@ -5,16 +5,20 @@
 //! - [`context`]: instance → adapter → device, headless; errors.
 //! - [`mirrors`]: `#[repr(C)]` twins of the shader structs, size-checked.
 //! - [`shaders`]: the WGSL files and how modules are assembled from them.
-//! - [`reference`]: the reference path tracer (METHOD.md §2), one dispatch
-//!   per pass, accumulating on the GPU.
+//! - [`renderer`]: progressive rendering, one dispatch per pass,
+//!   accumulating on the GPU; the reference path tracer (METHOD.md §2).
+//! - [`gather`]: the internal-lights final gather (METHOD.md §6) with the
+//!   lights built on the CPU and uploaded with their SH coefficients and
+//!   spatial indices.
 //!
-//! What exists so far is the reference method; the internal-lights method
-//! still runs on the CPU only.
+//! Still on the CPU only: placing the internal lights and their time-gated
+//! walks (METHOD.md §4–§5).
 
 pub mod context;
+pub mod gather;
 pub mod mirrors;
-pub mod reference;
+pub mod renderer;
 pub mod shaders;
 
 pub use context::{GpuContext, GpuError};
-pub use reference::{GpuImage, ReferenceRenderer};
+pub use renderer::{GpuImage, GpuRenderer};

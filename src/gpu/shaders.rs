@@ -53,6 +53,21 @@ pub const ACCUMULATE: ShaderPart = part!("common/accumulate.wgsl");
 pub const REFERENCE: ShaderPart = part!("common/reference.wgsl");
 /// The reference renderer's entry point (`cpu/mod.rs`, reference method).
 pub const REFERENCE_MAIN: ShaderPart = part!("reference/main.wgsl");
+/// Real spherical harmonics (`physics/sh.rs`).
+pub const SH: ShaderPart = part!("common/sh.wgsl");
+/// The cached internal lights' bindings 6–8 (`gpu/gather.rs`).
+pub const INTERNAL_DATA: ShaderPart = part!("common/internal_data.wgsl");
+/// The path-length clock (`physics/gated_walk.rs`, `march_clock`).
+pub const GATED_WALK: ShaderPart = part!("common/gated_walk.wgsl");
+/// Light grids (`physics/light_index.rs`).
+pub const LIGHT_INDEX: ShaderPart = part!("common/light_index.wgsl");
+/// Evaluating the internal lights (`physics/internal.rs`).
+pub const INTERNAL: ShaderPart = part!("common/internal.wgsl");
+/// The final gather (`physics/gather.rs`).
+pub const GATHER: ShaderPart = part!("common/gather.wgsl");
+/// The internal-lights renderer's entry point (`cpu/mod.rs`, internal
+/// method).
+pub const GATHER_MAIN: ShaderPart = part!("gather/main.wgsl");
 
 /// A shader module: a name and its parts in dependency order.
 #[derive(Clone, Copy, Debug)]
@@ -85,8 +100,35 @@ pub const REFERENCE_MODULE: ModuleSource = ModuleSource {
     entry_point: "reference_pass",
 };
 
+/// The internal-lights gather with lights built on the CPU, one pass per
+/// dispatch.
+pub const GATHER_MODULE: ModuleSource = ModuleSource {
+    name: "gather",
+    parts: &[
+        RNG,
+        FRAME,
+        PHASE,
+        SCENE,
+        VOLUME,
+        MAJORANT,
+        TRACKING,
+        LIGHTS,
+        CAMERA,
+        ACCUMULATE,
+        REFERENCE,
+        SH,
+        INTERNAL_DATA,
+        GATED_WALK,
+        LIGHT_INDEX,
+        INTERNAL,
+        GATHER,
+        GATHER_MAIN,
+    ],
+    entry_point: "gather_pass",
+};
+
 /// Every module the backend builds (the tests validate each).
-pub const MODULES: &[ModuleSource] = &[REFERENCE_MODULE];
+pub const MODULES: &[ModuleSource] = &[REFERENCE_MODULE, GATHER_MODULE];
 
 impl ModuleSource {
     /// The module's WGSL text: its parts concatenated, each preceded by a

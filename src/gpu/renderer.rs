@@ -1,14 +1,15 @@
-//! The reference path tracer (METHOD.md §2) as a wgpu compute pipeline with
-//! progressive accumulation on the GPU: one dispatch per pass adds one
+//! Progressive rendering on the GPU: one compute dispatch per pass adds one
 //! sample per pixel to a per-pixel running mean and variance that stays in
-//! GPU memory; the image is read back only for export and tests.
+//! GPU memory; the image is read back only for export and tests. One
+//! [`GpuRenderer`] serves both estimators; they differ in their shader
+//! module and the buffers bound after the scene's.
 //!
-//! The shader (`shaders/common/reference.wgsl`, entry point in
-//! `shaders/reference/main.wgsl`) mirrors `cpu::Renderer::pass` for the
-//! reference method: the same random stream per (seed, pixel, pass), the
-//! same pixel jitter, the same estimator (`physics::reference`), so the two
-//! backends agree statistically (not bitwise: `exp`, `log` and fused
-//! operations differ).
+//! The reference method (METHOD.md §2, `shaders/common/reference.wgsl`,
+//! entry point in `shaders/reference/main.wgsl`) mirrors
+//! `cpu::Renderer::pass`: the same random stream per (seed, pixel, pass),
+//! the same pixel jitter, the same estimator (`physics::reference`), so the
+//! two backends agree statistically (not bitwise: `exp`, `log` and fused
+//! operations differ). The internal-lights gather is in [`super::gather`].
 
 use glam::Vec3;
 use wgpu::util::DeviceExt;
@@ -217,8 +218,8 @@ impl GpuImage {
     }
 }
 
-/// A progressive reference renderer on the GPU for one prepared scene.
-pub struct ReferenceRenderer {
+/// A progressive GPU renderer for one prepared scene and one estimator.
+pub struct GpuRenderer {
     ctx: GpuContext,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
@@ -228,42 +229,59 @@ pub struct ReferenceRenderer {
     height: u32,
     seed: u64,
     samples: u32,
+    label: &'static str,
 }
 
-impl ReferenceRenderer {
-    /// Uploads the scene and builds the pipeline; `seed` selects the random
-    /// streams, as on the CPU.
-    pub fn new(ctx: &GpuContext, prepared: &Prepared, seed: u64) -> Result<Self, GpuError> {
+impl GpuRenderer {
+    /// The reference path tracer: uploads the scene and builds the
+    /// pipeline; `seed` selects the random streams, as on the CPU.
+    pub fn reference(ctx: &GpuContext, prepared: &Prepared, seed: u64) -> Result<Self, GpuError> {
+        Self::build(ctx, prepared, seed, &REFERENCE_MODULE, &[], 0)
+    }
+
+    /// A renderer running `module` over the scene's buffers (bindings
+    /// 0–4), the accumulation (5) and `extra` (binding, buffer) pairs
+    /// holding `extra_bytes`.
+    pub(crate) fn build(
+        ctx: &GpuContext,
+        prepared: &Prepared,
+        seed: u64,
+        module: &ModuleSource,
+        extra: &[(u32, &wgpu::Buffer)],
+        extra_bytes: u64,
+    ) -> Result<Self, GpuError> {
         let (width, height) = (prepared.camera.width, prepared.camera.height);
-        let pipeline = compute_pipeline(ctx, &REFERENCE_MODULE)?;
-        let buffers = SceneBuffers::new(ctx, prepared)?;
+        let pipeline = compute_pipeline(ctx, module)?;
+        let mut buffers = SceneBuffers::new(ctx, prepared)?;
+        buffers.bytes += extra_bytes;
         let pixels = width as u64 * height as u64;
         let accum_bytes = pixels * std::mem::size_of::<GpuAccum>() as u64;
         ctx.check_storage_size("accumulation buffer", accum_bytes)?;
+        let label = module.name;
         let (accum, bind_group) = ctx.scoped("allocating the accumulation buffer", || {
             let accum = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("reference accumulation"),
+                label: Some(label),
                 size: accum_bytes.max(16),
                 usage: wgpu::BufferUsages::STORAGE
                     | wgpu::BufferUsages::COPY_SRC
                     | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            let [e0, e1, e2, e3, e4] = buffers.entries();
+            let mut entries = buffers.entries().to_vec();
+            entries.push(wgpu::BindGroupEntry {
+                binding: 5,
+                resource: accum.as_entire_binding(),
+            });
+            for &(binding, buffer) in extra {
+                entries.push(wgpu::BindGroupEntry {
+                    binding,
+                    resource: buffer.as_entire_binding(),
+                });
+            }
             let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("reference bind group"),
+                label: Some(label),
                 layout: &pipeline.get_bind_group_layout(0),
-                entries: &[
-                    e0,
-                    e1,
-                    e2,
-                    e3,
-                    e4,
-                    wgpu::BindGroupEntry {
-                        binding: 5,
-                        resource: accum.as_entire_binding(),
-                    },
-                ],
+                entries: &entries,
             });
             (accum, bind_group)
         })?;
@@ -277,6 +295,7 @@ impl ReferenceRenderer {
             height,
             seed,
             samples: 0,
+            label,
         })
     }
 
@@ -298,7 +317,7 @@ impl ReferenceRenderer {
 
     /// Enqueues pass number `pass_index` (which selects the random streams,
     /// like `cpu::Renderer::pass`): one sample per pixel, accumulated on the
-    /// GPU. Does not wait for it; see [`ReferenceRenderer::finish`].
+    /// GPU. Does not wait for it; see [`GpuRenderer::finish`].
     pub fn add_pass(&mut self, pass_index: u32) {
         self.samples += 1;
         let params = GpuPassParams {
@@ -313,11 +332,11 @@ impl ReferenceRenderer {
         let mut encoder = ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("reference pass"),
+                label: Some(self.label),
             });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("reference pass"),
+                label: Some(self.label),
                 timestamp_writes: None,
             });
             pass.set_pipeline(&self.pipeline);
@@ -344,7 +363,7 @@ impl ReferenceRenderer {
             .ctx
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("reference reset"),
+                label: Some(self.label),
             });
         encoder.clear_buffer(&self.accum, 0, None);
         self.ctx.queue.submit([encoder.finish()]);
