@@ -254,6 +254,10 @@ fn gpu() -> Option<GpuContext> {
 fn oversized_buffers_fail_naming_the_limit() {
     let Some(ctx) = gpu() else { return };
     let max = ctx.limits.max_storage_buffer_binding_size;
+    println!(
+        "max_storage_buffer_binding_size {max} bytes, max_buffer_size {} bytes",
+        ctx.limits.max_buffer_size
+    );
     let err = ctx.check_storage_size("density grid", max + 4).unwrap_err();
     let msg = format!("{err:#}");
     assert!(
@@ -435,4 +439,52 @@ fn gather_agrees_chromatic_sphere() {
         24,
         256,
     );
+}
+
+/// A 512³ grid (512 MiB of f32) renders where the device can bind it, and
+/// otherwise fails before uploading with an error naming the density grid
+/// and the limit (lavapipe binds at most 128 MiB per storage buffer).
+#[test]
+fn grid_512_cubed_renders_or_names_the_limit() {
+    use lantern::scene::{Density, VoxelGrid};
+    let Some(ctx) = gpu() else { return };
+    let side = 512u32;
+    let grid = VoxelGrid {
+        dims: glam::UVec3::splat(side),
+        bounds_min: Vec3::splat(-1.0),
+        bounds_max: Vec3::splat(1.0),
+        data: vec![0.5; (side * side * side) as usize],
+    };
+    let mut scene =
+        lantern::scene::Scene::load(&common::root().join("assets/scenes/thin_sphere.ron"))
+            .unwrap_or_else(|e| panic!("{e}"));
+    scene.camera.width = 16;
+    scene.camera.height = 16;
+    let prepared = Prepared::with_density(scene, Density::Grid(Arc::new(grid)));
+    match GpuRenderer::reference(&ctx, &prepared, 0) {
+        Ok(mut renderer) => {
+            renderer.add_pass(0);
+            let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+            let mean = image_mean(&image.film().mean());
+            println!(
+                "512³ grid rendered on {}: {:.1} MiB on the GPU, image mean {mean}",
+                ctx.describe(),
+                renderer.gpu_bytes() as f64 / (1024.0 * 1024.0)
+            );
+            assert!(mean.is_finite() && mean.max_element() > 0.0);
+        }
+        Err(e) => {
+            let msg = format!("{e:#}");
+            println!("512³ grid on {}: {msg}", ctx.describe());
+            let limit = ctx.limits.max_storage_buffer_binding_size;
+            assert!(
+                limit < 512 << 20,
+                "refused although the limit allows it: {msg}"
+            );
+            assert!(
+                msg.contains("density grid") && msg.contains("max_storage_buffer_binding_size"),
+                "{msg}"
+            );
+        }
+    }
 }
