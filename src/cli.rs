@@ -1,7 +1,8 @@
 //! The command line: headless rendering, export and benchmarks.
 //!
-//! `lantern render SCENE.ron --out FILE.exr|FILE.png` renders a still;
-//! `lantern bench` measures samples per second on the example scenes;
+//! `lantern render SCENE.ron --out FILE.exr|FILE.png [--backend cpu|gpu]`
+//! renders a still; `lantern bench [--backend cpu|gpu] [--size WxH]`
+//! measures passes and samples per second on the example scenes;
 //! `lantern` alone, or `lantern view [SCENE]`, opens the previewer.
 
 use std::path::{Path, PathBuf};
@@ -14,10 +15,13 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cpu::Renderer;
+use crate::gpu::{GpuContext, GpuRenderer};
+use crate::physics::internal::InternalLights;
 use crate::render::export::write_image;
+use crate::render::film::image_mean;
 use crate::render::tonemap::ViewTransform;
-use crate::render::{Film, Prepared};
-use crate::scene::{ClockKind, InternalSettings, L1Kind, Method, Scene};
+use crate::render::{internal_params, Film, Prepared};
+use crate::scene::{ClockKind, InternalSettings, L1Kind, Method, RenderSettings, Scene};
 
 /// Lantern: multiple scattering as internal lights, live.
 #[derive(Debug, Parser)]
@@ -35,6 +39,45 @@ pub enum MethodArg {
     Reference,
     /// Multiple scatter as internal lights.
     Internal,
+}
+
+/// Which backend renders.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    /// The rayon CPU renderer (both methods).
+    #[default]
+    Cpu,
+    /// The wgpu compute renderer (the reference method so far).
+    Gpu,
+}
+
+/// An image size on the command line: `N` (square) or `WxH`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageSize {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+}
+
+impl std::str::FromStr for ImageSize {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        let parse = |v: &str| {
+            v.trim()
+                .parse::<u32>()
+                .map_err(|_| format!("{s:?}: expected N or WIDTHxHEIGHT in pixels"))
+        };
+        let (width, height) = match s.split_once(['x', 'X', '×']) {
+            Some((w, h)) => (parse(w)?, parse(h)?),
+            None => {
+                let n = parse(s)?;
+                (n, n)
+            }
+        };
+        Ok(Self { width, height })
+    }
 }
 
 /// Clock names on the command line.
@@ -181,6 +224,10 @@ pub enum Command {
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Which backend renders (gpu: for the internal-lights method only
+        /// the gather runs on the GPU; the lights are built on the CPU).
+        #[arg(long, value_enum, default_value_t = BackendArg::Cpu)]
+        backend: BackendArg,
         /// Exposure in stops, for PNG output.
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         exposure: f32,
@@ -201,15 +248,20 @@ pub enum Command {
         /// Repetitions; the median is reported.
         #[arg(long, default_value_t = 5)]
         repeats: u32,
-        /// Image side override in pixels (default: the scene's camera).
+        /// Image size override: N (square) or WIDTHxHEIGHT, e.g. 1920x1080
+        /// (default: the scene's camera).
         #[arg(long)]
-        size: Option<u32>,
+        size: Option<ImageSize>,
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
         /// The estimator.
         #[arg(long, value_enum, default_value_t = MethodArg::Reference)]
         method: MethodArg,
+        /// Which backend renders (gpu: for the internal-lights method only
+        /// the gather runs on the GPU; the lights are built on the CPU).
+        #[arg(long, value_enum, default_value_t = BackendArg::Cpu)]
+        backend: BackendArg,
         /// Internal-lights parameters.
         #[command(flatten)]
         internal: InternalArgs,
@@ -232,6 +284,7 @@ pub fn run(cli: Cli) -> Result<()> {
             out,
             seed,
             threads,
+            backend,
             exposure,
             view,
             internal,
@@ -243,6 +296,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 spp,
                 &out,
                 seed,
+                backend,
                 exposure,
                 view,
                 &internal,
@@ -255,10 +309,19 @@ pub fn run(cli: Cli) -> Result<()> {
             size,
             threads,
             method,
+            backend,
             internal,
         }) => {
             set_threads(threads)?;
-            bench_command(scenes, spp, repeats, size, method.into(), &internal)
+            bench_command(
+                scenes,
+                spp,
+                repeats,
+                size,
+                method.into(),
+                backend,
+                &internal,
+            )
         }
         Some(Command::Validate(args)) => crate::validate::run(&args),
     }
@@ -300,6 +363,7 @@ fn render_command(
     spp: Option<u32>,
     out: &Path,
     seed: Option<u64>,
+    backend: BackendArg,
     exposure: f32,
     view: ViewTransform,
     internal: &InternalArgs,
@@ -332,6 +396,11 @@ fn render_command(
         .internal
         .validate(scene_path)
         .context("invalid internal-lights parameter on the command line")?;
+    if backend == BackendArg::Gpu {
+        return render_gpu(
+            scene_path, &prepared, &settings, load_secs, out, exposure, view,
+        );
+    }
     let method = settings.method;
     let spp = settings.spp;
     let (w, h) = (prepared.camera.width, prepared.camera.height);
@@ -409,17 +478,178 @@ fn render_command(
     Ok(())
 }
 
+/// A spinner-less progress bar over `spp` passes.
+fn pass_bar(spp: u32) -> ProgressBar {
+    let bar = ProgressBar::new(spp as u64);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} spp ({eta})",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
+}
+
+/// The GPU device for `--backend gpu`, with a notice of what it is.
+fn gpu_context() -> Result<GpuContext> {
+    let ctx = GpuContext::new_headless()?;
+    println!(
+        "GPU backend on {}{}",
+        ctx.describe(),
+        if ctx.is_software() {
+            " (software rendering on the CPU: timings are not GPU timings)"
+        } else {
+            ""
+        }
+    );
+    Ok(ctx)
+}
+
+/// `render --backend gpu`: the reference method on the GPU, accumulated
+/// there and read back once for the image file.
+fn render_gpu(
+    scene_path: &Path,
+    prepared: &Prepared,
+    settings: &RenderSettings,
+    load_secs: f64,
+    out: &Path,
+    exposure: f32,
+    view: ViewTransform,
+) -> Result<()> {
+    let (w, h) = (prepared.camera.width, prepared.camera.height);
+    let ctx = gpu_context()?;
+    let t_build = Instant::now();
+    let mut renderer = gpu_renderer(&ctx, prepared, settings)?;
+    renderer.finish()?;
+    let build_secs = t_build.elapsed().as_secs_f64();
+    let bar = pass_bar(settings.spp);
+    let start = Instant::now();
+    for pass in 0..settings.spp {
+        renderer.add_pass(pass);
+        // Waiting after each pass keeps the progress bar honest and the
+        // queue short; the accumulation itself stays on the GPU.
+        renderer.finish()?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+    let image = renderer.read_back()?;
+    let film = image.film();
+    write_image(out, w, h, &film.mean(), exposure, view)?;
+    let mean = film.image_mean();
+    let single = image_mean(&image.single_mean());
+    let samples = w as f64 * h as f64 * film.samples as f64;
+    println!(
+        "rendered {} ({w}×{h}, {} spp, {:?}, GPU) in {:.2} s (+{:.2} s loading, {:.2} s lights, pipeline and upload, {:.1} MiB on the GPU): {:.3} M samples/s; image mean RGB {:.5} {:.5} {:.5}; wrote {}",
+        scene_path.display(),
+        film.samples,
+        settings.method,
+        secs,
+        load_secs,
+        build_secs,
+        renderer.gpu_bytes() as f64 / (1024.0 * 1024.0),
+        samples / secs / 1e6,
+        mean.x,
+        mean.y,
+        mean.z,
+        out.display()
+    );
+    let rest = mean - single;
+    println!(
+        "  single scatter mean {:.5} {:.5} {:.5}; {} mean {:.5} {:.5} {:.5}",
+        single.x,
+        single.y,
+        single.z,
+        match settings.method {
+            Method::Reference => "multiple scatter",
+            Method::Internal => "internal-light part",
+        },
+        rest.x,
+        rest.y,
+        rest.z
+    );
+    Ok(())
+}
+
+/// The GPU renderer for `settings.method`; for the internal-lights method
+/// the lights are built on the CPU first (placement and walks run there).
+fn gpu_renderer(
+    ctx: &GpuContext,
+    prepared: &Prepared,
+    settings: &RenderSettings,
+) -> Result<GpuRenderer> {
+    match settings.method {
+        Method::Reference => Ok(GpuRenderer::reference(ctx, prepared, settings.seed)?),
+        Method::Internal => {
+            let params = internal_params(prepared, settings);
+            let never = AtomicBool::new(false);
+            let lights = InternalLights::build(&prepared.volume, &prepared.lights, &params, &never)
+                .context("internal-light build was cancelled")?;
+            println!(
+                "internal lights (built on the CPU): M = {}, s* = {:.4}, N = {}, K = {}, clock {:?}: placed in {:.3} s, walked in {:.3} s",
+                lights.len(),
+                lights.s_star,
+                lights.params.terms,
+                lights.params.walks,
+                lights.params.clock,
+                lights.timings.placement,
+                lights.timings.walks + lights.timings.index,
+            );
+            Ok(GpuRenderer::internal(
+                ctx,
+                prepared,
+                &lights,
+                settings.internal.light_samples,
+                settings.seed,
+            )?)
+        }
+    }
+}
+
+/// Times `spp` passes of the GPU renderer `repeats` times (each with its
+/// own seed, accumulation cleared); returns the set-up time (internal
+/// lights built on the CPU, pipeline, upload) and the median render time.
+fn bench_gpu(ctx: &GpuContext, prepared: &Prepared, spp: u32, repeats: u32) -> Result<(f64, f64)> {
+    let start = Instant::now();
+    let mut settings = prepared.scene.render.clone();
+    settings.seed = 0;
+    let mut renderer = gpu_renderer(ctx, prepared, &settings)?;
+    renderer.finish()?;
+    let build = start.elapsed().as_secs_f64();
+    // One untimed pass: the first dispatch may still compile or page in.
+    renderer.add_pass(0);
+    renderer.finish()?;
+    let mut times = Vec::new();
+    for r in 0..repeats {
+        renderer.reset(r as u64);
+        renderer.finish()?;
+        let start = Instant::now();
+        for pass in 0..spp {
+            renderer.add_pass(pass);
+        }
+        renderer.finish()?;
+        times.push(start.elapsed().as_secs_f64());
+    }
+    times.sort_by(f64::total_cmp);
+    Ok((build, times[times.len() / 2]))
+}
+
 fn bench_command(
     scenes: Vec<PathBuf>,
     spp: u32,
     repeats: u32,
-    size: Option<u32>,
+    size: Option<ImageSize>,
     method: Method,
+    backend: BackendArg,
     internal: &InternalArgs,
 ) -> Result<()> {
     if spp == 0 || repeats == 0 {
         bail!("--spp and --repeats must be at least 1");
     }
+    let gpu = match backend {
+        BackendArg::Cpu => None,
+        BackendArg::Gpu => Some(gpu_context()?),
+    };
     let scenes = if scenes.is_empty() {
         let mut v: Vec<PathBuf> = std::fs::read_dir("assets/scenes")
             .context("cannot list assets/scenes (run from the repository root or name scenes)")?
@@ -432,14 +662,23 @@ fn bench_command(
         scenes
     };
     println!(
-        "{:<28} {:>9} {:>6} {:>12} {:>14} {:>14}",
-        "scene", "size", "spp", "median s", "M samples/s", "re-sample s"
+        "{:<28} {:>10} {:>6} {:>12} {:>10} {:>14} {:>14}",
+        "scene",
+        "size",
+        "spp",
+        "median s",
+        "passes/s",
+        "M samples/s",
+        match backend {
+            BackendArg::Cpu => "re-sample s",
+            BackendArg::Gpu => "set-up s",
+        }
     );
     for path in scenes {
         let mut scene = Scene::load(&path)?;
         if let Some(s) = size {
-            scene.camera.width = s;
-            scene.camera.height = s;
+            scene.camera.width = s.width;
+            scene.camera.height = s.height;
             scene.validate(&path)?;
         }
         scene.render.method = method;
@@ -448,6 +687,26 @@ fn bench_command(
         let dir = path.parent().unwrap_or(Path::new("."));
         let prepared = Arc::new(Prepared::new(scene, dir)?);
         let (w, h) = (prepared.camera.width, prepared.camera.height);
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy())
+            .unwrap_or_default();
+        let samples = w as f64 * h as f64 * spp as f64;
+        if let Some(ctx) = &gpu {
+            let (build, median) = bench_gpu(ctx, &prepared, spp, repeats)
+                .with_context(|| format!("{}", path.display()))?;
+            println!(
+                "{:<28} {:>10} {:>6} {:>12.3} {:>10.2} {:>14.3} {:>14.3}",
+                name,
+                format!("{w}×{h}"),
+                spp,
+                median,
+                spp as f64 / median,
+                samples / median / 1e6,
+                build
+            );
+            continue;
+        }
         let never = AtomicBool::new(false);
         let mut times = Vec::new();
         let mut builds = Vec::new();
@@ -468,15 +727,13 @@ fn bench_command(
         builds.sort_by(f64::total_cmp);
         let median = times[times.len() / 2];
         let build = builds[builds.len() / 2];
-        let samples = w as f64 * h as f64 * spp as f64;
         println!(
-            "{:<28} {:>9} {:>6} {:>12.3} {:>14.3} {:>14.3}",
-            path.file_name()
-                .map(|n| n.to_string_lossy())
-                .unwrap_or_default(),
+            "{:<28} {:>10} {:>6} {:>12.3} {:>10.2} {:>14.3} {:>14.3}",
+            name,
             format!("{w}×{h}"),
             spp,
             median,
+            spp as f64 / median,
             samples / median / 1e6,
             build
         );

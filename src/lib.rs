@@ -14,16 +14,19 @@
 //! physics/  pure math on glam: phase function, tracking, transmittance, estimators
 //! render/   backend-neutral: prepared scene, progressive film, tone mapping, export
 //! cpu/      the rayon backend
+//! gpu/      the wgpu backend: headless device, GPU mirrors, compute pipelines
 //! ui/       the interactive previewer (eframe, egui, rfd): the only UI code
 //! cli.rs    headless rendering, export and benchmarks
 //! ```
 //!
 //! `scene` and `physics` are leaves and never import each other; `render`
-//! uses both; `cpu` uses `render`; only `cli` and `ui` sit on top.
+//! uses both; `cpu` and `gpu` use `render`; only `cli` and `ui` sit on
+//! top.
 //! Renderers know nothing of any user interface.
 
 pub mod cli;
 pub mod cpu;
+pub mod gpu;
 pub mod physics;
 pub mod render;
 pub mod scene;

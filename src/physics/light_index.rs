@@ -70,6 +70,22 @@ impl LightGrid {
         grid
     }
 
+    /// The grid's minimum corner.
+    pub fn min(&self) -> Vec3 {
+        self.min
+    }
+
+    /// The size of one cell.
+    pub fn cell_size(&self) -> Vec3 {
+        self.cell
+    }
+
+    /// Where each cell's lights start in [`LightGrid::ids`] (one entry per
+    /// cell, then the total).
+    pub fn starts(&self) -> &[u32] {
+        &self.starts
+    }
+
     /// Cells along each axis.
     pub fn resolution(&self) -> UVec3 {
         self.res

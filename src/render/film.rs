@@ -32,6 +32,29 @@ impl Film {
         }
     }
 
+    /// A film from per-pixel moments accumulated elsewhere (the GPU's
+    /// running means and sums of squared deviations, Welford's form) over
+    /// `samples` samples: what [`Film::add_pass`] would have summed.
+    pub fn from_moments(width: u32, height: u32, samples: u32, mean: &[Vec3], m2: &[Vec3]) -> Self {
+        let n = samples as f64;
+        let (sum, sum_sq) = mean
+            .iter()
+            .zip(m2)
+            .map(|(m, d)| {
+                let s = |c: usize| m[c] as f64 * n;
+                let s2 = |c: usize| d[c].max(0.0) as f64 + n * (m[c] as f64).powi(2);
+                ([s(0), s(1), s(2)], [s2(0), s2(1), s2(2)])
+            })
+            .unzip();
+        Self {
+            width,
+            height,
+            sum,
+            sum_sq,
+            samples,
+        }
+    }
+
     /// Number of pixels.
     pub fn len(&self) -> usize {
         self.sum.len()
@@ -141,5 +164,29 @@ mod tests {
         // Samples 1 and 3: sample variance 2, variance of the mean 1.
         assert!((v[0].x - 1.0).abs() < 1e-6);
         assert_eq!(v[1].x, 0.0);
+    }
+
+    /// Welford moments (as the GPU keeps them) give the film that summing
+    /// the samples gives.
+    #[test]
+    fn from_moments_matches_add_pass() {
+        let samples = [1.0f32, 4.0, 2.5, -0.5];
+        let mut f = Film::new(1, 1);
+        let (mut mean, mut m2) = (0.0f32, 0.0f32);
+        for (i, &x) in samples.iter().enumerate() {
+            f.add_pass(&[Vec3::splat(x)]);
+            let delta = x - mean;
+            mean += delta / (i + 1) as f32;
+            m2 += delta * (x - mean);
+        }
+        let g = Film::from_moments(1, 1, 4, &[Vec3::splat(mean)], &[Vec3::splat(m2)]);
+        assert_eq!(g.samples, f.samples);
+        assert!((g.mean()[0] - f.mean()[0]).abs().max_element() < 1e-6);
+        assert!(
+            (g.variance_of_mean()[0] - f.variance_of_mean()[0])
+                .abs()
+                .max_element()
+                < 1e-6
+        );
     }
 }

@@ -1,0 +1,226 @@
+// The final gather of the internal-lights method (METHOD.md §6). Mirrors
+// `gather` in src/physics/gather.rs, part for part: `single` (the k = 0
+// part of L₀: one collision in the window, next-event estimation),
+// `reconstructed` (the k ≥ 1 part of L₀ from the kernel reconstruction at
+// stratified points) and `internal` (L₁: one light per sample, a cluster
+// ∝ P_c / (d_c² + h²) and a light ∝ V_i J̄_i, equiangular sampling of the
+// ray about it). The CPU keeps the clusters' running sums in a vector;
+// here the selection scans the live clusters again with the same
+// arithmetic, which picks the same cluster without per-thread storage.
+
+// One gather estimate, by part (`GatherSample`).
+struct GatherSample {
+    single: vec3<f32>,
+    reconstructed: vec3<f32>,
+    internal: vec3<f32>,
+}
+
+// The clock's advance along the ray from `origin` over `[0, t]`,
+// `t ≤ t_exit` (`clock_to`).
+fn clock_to(clock: u32, origin: vec3<f32>, dir: vec3<f32>, t: f32, t_exit: f32) -> f32 {
+    if clock == CLOCK_GEOMETRIC {
+        return t;
+    }
+    let m = march_clock(clock, origin, dir, 0.0, t_exit, t, BIG);
+    if m.reached {
+        return BIG;
+    }
+    return m.value;
+}
+
+// Distance from `p` to the segment `a + t d`, `t ∈ [0, len]`
+// (`distance_to_segment`).
+fn distance_to_segment(p: vec3<f32>, a: vec3<f32>, d: vec3<f32>, len: f32) -> f32 {
+    let t = clamp(dot(p - a, d), 0.0, len);
+    return length(p - (a + d * t));
+}
+
+// The selection weight of live cluster `c` for the window `x + t dir`,
+// `t ∈ [0, window]`, or a negative number when it is out of reach (the
+// loop body that builds the CPU's `cdf`).
+fn cluster_weight(c: u32, x: vec3<f32>, dir: vec3<f32>, window: f32, h2: f32) -> f32 {
+    let bx = cluster_box(c);
+    let centre = 0.5 * (bx[0] + bx[1]);
+    let half_diag = 0.5 * length(bx[1] - bx[0]);
+    if gather_params.clock == CLOCK_GEOMETRIC && length(centre - x) - half_diag > gather_params.s_star {
+        return -1.0;
+    }
+    let d = max(distance_to_segment(centre, x, dir, window) - half_diag, 0.0);
+    let power = bitcast<f32>(internal_words[gather_params.cluster_power_offset + c]);
+    return power / (d * d + h2);
+}
+
+// One estimate of `L₀ + L₁` for the camera ray `eye + t dir` with
+// `samples` stratified points and internal-light samples (`gather`).
+fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rng>) -> GatherSample {
+    var out = GatherSample(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    let clip = medium_clip(eye, dir);
+    if !clip.hit {
+        return out;
+    }
+    let x = eye + dir * clip.t0;
+    let len = clip.t1 - clip.t0;
+    let s_star = gather_params.s_star;
+    let clock = gather_params.clock;
+    // The window's end along the ray.
+    let wm = march_clock(clock, x, dir, 0.0, len, len, s_star);
+    let window = select(len, wm.value, wm.reached);
+    if window <= 0.0 {
+        return out;
+    }
+    let n = -dir;
+
+    // L₀, k = 0: one collision inside the window, next-event estimation.
+    var weight = vec3<f32>(1.0);
+    let flight = free_flight(x, dir, 0.0, window, &weight, rng);
+    if flight.hit {
+        let y = x + dir * flight.t;
+        out.single = weight * scene.medium.albedo * single_scatter_source(y, n, rng);
+    }
+
+    let samples = max(samples_in, 1u);
+    // L₀, k ≥ 1: stratified points, ratio-tracked transmittance.
+    let step = window / f32(samples);
+    for (var j = 0u; j < samples; j++) {
+        let t = (f32(j) + rng_next_f32(rng)) * step;
+        let y = x + dir * t;
+        let rho = density(y);
+        let j_hat = reconstruct_multi(y, n, rho);
+        if all(j_hat == vec3<f32>(0.0)) {
+            continue;
+        }
+        let tr = transmittance(x, dir, t, rng);
+        out.reconstructed += tr * j_hat * step;
+    }
+
+    // L₁: internal lights.
+    let live = gather_params.live_count;
+    if live == 0u {
+        return out;
+    }
+    let h = gather_params.softening;
+    let h2 = h * h;
+    var total = 0.0;
+    for (var k = 0u; k < live; k++) {
+        let c = internal_words[gather_params.live_offset + k];
+        let w = cluster_weight(c, x, dir, window, h2);
+        if w >= 0.0 {
+            total += w;
+        }
+    }
+    if total <= 0.0 {
+        return out;
+    }
+    let inv_samples = 1.0 / f32(samples);
+    for (var s = 0u; s < samples; s++) {
+        // A cluster: the first whose running sum exceeds u, else the last.
+        let u = rng_next_f32(rng) * total;
+        var cum = 0.0;
+        var prev = 0.0;
+        var c = 0u;
+        for (var k = 0u; k < live; k++) {
+            let ck = internal_words[gather_params.live_offset + k];
+            let w = cluster_weight(ck, x, dir, window, h2);
+            if w < 0.0 {
+                continue;
+            }
+            prev = cum;
+            cum += w;
+            c = ck;
+            if cum > u {
+                break;
+            }
+        }
+        let p_cluster = (cum - prev) / total;
+        // Then a light in it, ∝ its power.
+        let start = cluster_start(c);
+        let end = cluster_start(c + 1u);
+        let count = end - start;
+        let cluster_power = bitcast<f32>(internal_words[gather_params.cluster_power_offset + c]);
+        var pick = rng_next_f32(rng) * cluster_power;
+        var slot = count - 1u;
+        for (var k = 0u; k < count; k++) {
+            let p = bitcast<f32>(internal_words[gather_params.light_power_offset + start + k]);
+            if pick < p {
+                slot = k;
+                break;
+            }
+            pick -= p;
+        }
+        // Rounding may leave `pick` past the end: the last light with power.
+        if bitcast<f32>(internal_words[gather_params.light_power_offset + start + slot]) <= 0.0 {
+            for (var k = count; k > 0u; k--) {
+                if bitcast<f32>(internal_words[gather_params.light_power_offset + start + k - 1u]) > 0.0 {
+                    slot = k - 1u;
+                    break;
+                }
+            }
+        }
+        let slot_power = bitcast<f32>(internal_words[gather_params.light_power_offset + start + slot]);
+        let q = p_cluster * slot_power / cluster_power;
+        if q <= 0.0 {
+            continue;
+        }
+        let i = cluster_id(start + slot);
+        let light = internal_light(i);
+        let xi = light.position;
+
+        // Equiangular sampling of t ∈ [0, window] for the kernel
+        // 1/(r² + h²) = 1/(D² + h² + (t − t_c)²).
+        let t_c = dot(xi - x, dir);
+        let off = (xi - x) - dir * t_c;
+        let d2 = dot(off, off) + h2;
+        let dd = sqrt(d2);
+        let theta_a = atan((0.0 - t_c) / dd);
+        let theta_b = atan((window - t_c) / dd);
+        let span = theta_b - theta_a;
+        if span <= 0.0 {
+            continue;
+        }
+        let t = clamp(t_c + dd * tan(theta_a + rng_next_f32(rng) * span), 0.0, window);
+        let y = x + dir * t;
+        let rho_y = density(y);
+        if rho_y <= 0.0 {
+            continue;
+        }
+        let to_y = y - xi;
+        let r = length(to_y);
+        if r <= 0.0 {
+            continue;
+        }
+        let n_light = to_y / r;
+        // The window condition on the total path length.
+        var within = false;
+        if clock == CLOCK_GEOMETRIC {
+            within = t + r <= s_star;
+        } else {
+            let a = clock_to(clock, x, dir, t, len);
+            if a <= s_star {
+                let back = -n_light;
+                let bc = medium_clip(y, back);
+                if bc.hit {
+                    within = a + clock_to(clock, y, back, min(r, bc.t1), bc.t1) <= s_star;
+                } else {
+                    within = true;
+                }
+            }
+        }
+        if !within {
+            continue;
+        }
+        let jv = eval_j(i, n_light);
+        if all(jv == vec3<f32>(0.0)) {
+            continue;
+        }
+        let tr = transmittance(x, dir, t, rng) * transmittance(y, -n_light, r, rng);
+        if all(tr == vec3<f32>(0.0)) {
+            continue;
+        }
+        let b = gather_params.scatter * rho_y;
+        let p = hg(gather_params.g, dot(n_light, n));
+        // V_i b P T T J / (r² + h²) / (q · pdf(t)), with
+        // 1 / ((r² + h²) pdf(t)) = span / D'.
+        out.internal += b * tr * jv * (light.weight * p * span / dd / q * inv_samples);
+    }
+    return out;
+}

@@ -1,0 +1,101 @@
+// Evaluating the cached internal lights (METHOD.md §5, §6). Mirrors the
+// read side of `InternalLights` in src/physics/internal.rs: `S₁` from the
+// stored arriving light, the multiply scattered part from its SH
+// coefficients (clamped at zero), and the kernel reconstruction of `Ĵ`
+// along a ray.
+
+// One internal light (`InternalLight`, plus its reconstruction scale).
+struct InternalLight {
+    position: vec3<f32>,
+    density: f32,
+    weight: f32,
+    recon_scale: f32,
+}
+
+// Light `i`.
+fn internal_light(i: u32) -> InternalLight {
+    let base = gather_params.lights_offset + 2u * i;
+    let a = internal_vec4[base];
+    let b = internal_vec4[base + 1u];
+    return InternalLight(a.xyz, a.w, b.x, b.y);
+}
+
+// `S₁(x_i, n)` from the stored arriving light (`eval_s1`).
+fn eval_s1(i: u32, n: vec3<f32>) -> vec3<f32> {
+    let light = internal_light(i);
+    let count = gather_params.external_count;
+    var sum = vec3<f32>(0.0);
+    for (var l = 0u; l < count; l++) {
+        let arrival = internal_vec4[gather_params.arrival_offset + i * count + l].xyz;
+        let s = light_at(l, light.position);
+        sum += arrival * hg(gather_params.g, dot(s.travel, n));
+    }
+    return sum * gather_params.scatter * light.density;
+}
+
+// The multiply scattered part of `J_i` for the basis values `y`, clamped at
+// zero (`eval_multi_with`).
+fn eval_multi_with(i: u32, y: ptr<function, array<f32, 25>>) -> vec3<f32> {
+    let count = gather_params.sh_count;
+    let base = gather_params.multi_offset + i * count;
+    var sum = vec3<f32>(0.0);
+    for (var k = 0u; k < count; k++) {
+        sum += internal_vec4[base + k].xyz * (*y)[k];
+    }
+    return max(sum, vec3<f32>(0.0));
+}
+
+// `J_i(n)`: `S₁` plus the multiply scattered part (`eval_j`).
+fn eval_j(i: u32, n: vec3<f32>) -> vec3<f32> {
+    var y = sh_basis(gather_params.sh_order, n);
+    return eval_s1(i, n) + eval_multi_with(i, &y);
+}
+
+// The factor that turns the kernel average back into `Ĵ` at a point of
+// density `density_at_p` (`reconstruction_scale`).
+fn reconstruction_scale(density_at_p: f32) -> f32 {
+    if gather_params.clock == CLOCK_GEOMETRIC {
+        return 1.0;
+    }
+    return gather_params.sigma_grey * density_at_p;
+}
+
+// The kernel reconstruction of the multiply scattered `Ĵ(p, n)` from the
+// lights within `h` of `p`, kernel `(1 − r²/h²)²` (`reconstruct_multi`
+// with `for_each_kernel_weight` and `LightGrid::for_each_near`).
+fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32) -> vec3<f32> {
+    let scale_p = reconstruction_scale(density_at_p);
+    if scale_p <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    var y = sh_basis(gather_params.sh_order, n);
+    let h = gather_params.kernel_radius;
+    let inv_h2 = 1.0 / (h * h);
+    let res = gather_params.fine_res;
+    let lo = light_grid_coords(p - vec3<f32>(h), gather_params.fine_min, gather_params.fine_cell, res);
+    let hi = light_grid_coords(p + vec3<f32>(h), gather_params.fine_min, gather_params.fine_cell, res);
+    var num = vec3<f32>(0.0);
+    var den = 0.0;
+    for (var z = lo.z; z <= hi.z; z++) {
+        for (var yy = lo.y; yy <= hi.y; yy++) {
+            let row = res.x * (yy + res.y * z);
+            let a = fine_start(row + lo.x);
+            let b = fine_start(row + hi.x + 1u);
+            for (var k = a; k < b; k++) {
+                let i = fine_id(k);
+                let light = internal_light(i);
+                let d = light.position - p;
+                let q = dot(d, d) * inv_h2;
+                if q < 1.0 {
+                    let w = (1.0 - q) * (1.0 - q);
+                    num += eval_multi_with(i, &y) * (w * light.recon_scale);
+                    den += w;
+                }
+            }
+        }
+    }
+    if den > 0.0 {
+        return num * (scale_p / den);
+    }
+    return vec3<f32>(0.0);
+}

@@ -1,0 +1,82 @@
+// The unbiased reference estimator (METHOD.md §2). Mirrors
+// src/physics/reference.rs: a volumetric path tracer with spectral tracking
+// for free flights, ratio tracking for shadow rays, next-event estimation to
+// every light, and Russian roulette. Paths are traced backwards from the
+// camera; at a real collision the path arriving along `dir` receives light
+// scattered into `-dir`.
+
+// Collisions after which Russian roulette starts (`RR_START_DEPTH`).
+const RR_START_DEPTH: u32 = 3u;
+
+// A guard against a path that never ends, which the CPU does not need: the
+// roulette survives at most 0.95 per collision, so the light it cuts off is
+// below 0.95^4096 (1e-91) of a path's weight.
+const MAX_COLLISIONS_GUARD: u32 = 4096u;
+
+// `S₁(p, n) / b(p)`: in-scattered first-scatter radiance per unit scattering
+// coefficient at `p` towards `n`, transmittance by ratio tracking
+// (`single_scatter_source`).
+fn single_scatter_source(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) -> vec3<f32> {
+    var sum = vec3<f32>(0.0);
+    let count = light_count();
+    for (var i = 0u; i < count; i++) {
+        let l = light_at(i, p);
+        let phase = hg(scene.medium.g, dot(l.travel, n));
+        let tr = transmittance(p, -l.travel, l.distance, rng);
+        sum += l.irradiance * tr * phase;
+    }
+    return sum;
+}
+
+// A radiance estimate and its single-scattering part.
+struct RadianceSplit {
+    radiance: vec3<f32>,
+    single: vec3<f32>,
+}
+
+// One path-traced estimate of the radiance arriving at `origin` from
+// `-dir`, counting at most `max_collisions` scatterings (0xffffffff: all
+// orders), and its single-scattering part (`radiance_split`).
+fn radiance_split(origin: vec3<f32>, dir: vec3<f32>, max_collisions: u32, rng: ptr<function, Rng>) -> RadianceSplit {
+    let albedo = scene.medium.albedo;
+    let g = scene.medium.g;
+    var single = vec3<f32>(0.0);
+    var radiance = vec3<f32>(0.0);
+    var weight = vec3<f32>(1.0);
+    var o = origin;
+    var d = dir;
+    var depth = 0u;
+    loop {
+        let clip = medium_clip(o, d);
+        if !clip.hit {
+            break;
+        }
+        let flight = free_flight(o, d, clip.t0, clip.t1, &weight, rng);
+        if !flight.hit {
+            break;
+        }
+        let p = o + d * flight.t;
+        weight *= albedo;
+        let contribution = weight * single_scatter_source(p, -d, rng);
+        radiance += contribution;
+        if depth == 0u {
+            single = contribution;
+        }
+        depth += 1u;
+        if depth >= max_collisions || depth >= MAX_COLLISIONS_GUARD {
+            break;
+        }
+        if depth >= RR_START_DEPTH {
+            let q = min(max_element(weight), 0.95);
+            if q <= 0.0 || rng_next_f32(rng) >= q {
+                break;
+            }
+            weight /= q;
+        }
+        let u1 = rng_next_f32(rng);
+        let u2 = rng_next_f32(rng);
+        d = sample_hg(g, d, u1, u2);
+        o = p;
+    }
+    return RadianceSplit(radiance, single);
+}

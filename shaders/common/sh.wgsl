@@ -1,0 +1,78 @@
+// Real spherical harmonics, orders 0..=4 (METHOD.md §5: the angular part
+// of the internal lights). Mirrors src/physics/sh.rs: orthonormal real
+// basis with the Condon–Shortley phase, coefficient `l(l+1) + m`, evaluated
+// without trigonometry from `(x + iy)^m` and the recurrence for
+// `P_l^m(z) / sin^m θ`.
+
+// The highest supported order (`MAX_ORDER`).
+const SH_MAX_ORDER: u32 = 4u;
+
+// `K_l^|m|` (times √2 for m ≠ 0), indexed by `l(l+1) + m` (`NORM`).
+const SH_NORM = array<f32, 25>(
+    0.2820948,
+    0.4886025,
+    0.4886025,
+    0.4886025,
+    0.1820914,
+    0.3641828,
+    0.6307831,
+    0.3641828,
+    0.1820914,
+    0.03933624,
+    0.09635371,
+    0.3046972,
+    0.7463527,
+    0.3046972,
+    0.09635371,
+    0.03933624,
+    0.00596034,
+    0.016858388,
+    0.06307831,
+    0.2676186,
+    0.8462844,
+    0.2676186,
+    0.06307831,
+    0.016858388,
+    0.00596034,
+);
+
+// `Y_i(dir)` for `i < (order + 1)²`, the rest zero (`sh_basis`).
+fn sh_basis(order: u32, dir: vec3<f32>) -> array<f32, 25> {
+    let ord = min(order, SH_MAX_ORDER);
+    var norm = SH_NORM;
+    var re: array<f32, 5>;
+    var im: array<f32, 5>;
+    re[0] = 1.0;
+    for (var m = 1u; m <= ord; m++) {
+        re[m] = re[m - 1u] * dir.x - im[m - 1u] * dir.y;
+        im[m] = re[m - 1u] * dir.y + im[m - 1u] * dir.x;
+    }
+    var full: array<f32, 25>;
+    // Q_m^m = (−1)^m (2m − 1)!!
+    var q_mm = 1.0;
+    for (var m = 0u; m <= ord; m++) {
+        if m > 0u {
+            q_mm *= -f32(2u * m - 1u);
+        }
+        var q_prev = 0.0;
+        var q = q_mm;
+        for (var l = m; l <= ord; l++) {
+            if l == m + 1u {
+                q_prev = q;
+                q = dir.z * f32(2u * m + 1u) * q_mm;
+            } else if l > m + 1u {
+                let next = (f32(2u * l - 1u) * dir.z * q - f32(l + m - 1u) * q_prev) / f32(l - m);
+                q_prev = q;
+                q = next;
+            }
+            let centre = l * (l + 1u);
+            if m == 0u {
+                full[centre] = norm[centre] * q;
+            } else {
+                full[centre + m] = norm[centre + m] * q * re[m];
+                full[centre - m] = norm[centre - m] * q * im[m];
+            }
+        }
+    }
+    return full;
+}

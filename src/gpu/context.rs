@@ -1,0 +1,224 @@
+//! The wgpu device, created headless (no window, no surface): instance →
+//! adapter → device, with the adapter's own limits so that large volumes
+//! fit where the hardware allows. Errors are a `thiserror` enum naming the
+//! limit or the step at fault.
+//!
+//! Backend and adapter follow wgpu's environment variables
+//! (`WGPU_BACKEND=vulkan|gl|…`, `WGPU_ADAPTER_NAME=substring`,
+//! `WGPU_POWER_PREF`), so CI can pin Mesa's lavapipe.
+
+use std::sync::{Arc, Mutex};
+
+/// What can go wrong in the GPU backend.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter (GPU or software rasteriser) is available.
+    #[error("no GPU adapter available ({0}); install a Vulkan driver (e.g. Mesa's lavapipe, package mesa-vulkan-drivers) or use the CPU backend")]
+    NoAdapter(String),
+    /// The adapter refused to create a device.
+    #[error("cannot create a GPU device on {adapter}: {source}")]
+    Device {
+        /// The adapter's name.
+        adapter: String,
+        /// wgpu's reason.
+        source: wgpu::RequestDeviceError,
+    },
+    /// A buffer is larger than a device limit allows.
+    #[error("the {what} needs {bytes} bytes, more than this device's {limit} ({max} bytes); use a smaller volume or image, or the CPU backend")]
+    TooLarge {
+        /// Which data (e.g. "density grid").
+        what: String,
+        /// Its size in bytes.
+        bytes: u64,
+        /// The name of the wgpu limit.
+        limit: &'static str,
+        /// The limit's value on this device.
+        max: u64,
+    },
+    /// wgpu reported an error (a shader that does not compile, a bad
+    /// binding, out of memory).
+    #[error("GPU error in {context}: {message}")]
+    Wgpu {
+        /// What was being done.
+        context: String,
+        /// wgpu's message.
+        message: String,
+    },
+    /// The GPU backend does not implement this estimator yet.
+    #[error("the GPU backend does not implement {0} yet; use the CPU backend")]
+    Unsupported(&'static str),
+    /// Reading results back from the GPU failed.
+    #[error("reading back {what} failed: {message}")]
+    Readback {
+        /// Which buffer.
+        what: &'static str,
+        /// Why.
+        message: String,
+    },
+}
+
+/// A headless wgpu device and queue, with the adapter's description.
+#[derive(Clone, Debug)]
+pub struct GpuContext {
+    /// The logical device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// The adapter it runs on (name, backend, device type).
+    pub adapter_info: wgpu::AdapterInfo,
+    /// The limits the device was created with (the adapter's).
+    pub limits: wgpu::Limits,
+    /// Errors wgpu reported outside an error scope, oldest first; checked
+    /// by [`GpuContext::take_error`] instead of wgpu's default panic.
+    uncaptured: Arc<Mutex<Vec<String>>>,
+}
+
+impl GpuContext {
+    /// Creates a device on the first suitable adapter, without a window.
+    pub fn new_headless() -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_headless_async())
+    }
+
+    async fn new_headless_async() -> Result<Self, GpuError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::from_env()
+                    .unwrap_or(wgpu::PowerPreference::HighPerformance),
+                ..Default::default()
+            })
+            .await
+            .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
+            Ok(name) => pick_named(&instance, &name).await.unwrap_or(adapter),
+            Err(_) => adapter,
+        };
+        let adapter_info = adapter.get_info();
+        let limits = adapter.limits();
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("lantern device"),
+                required_features: wgpu::Features::empty(),
+                required_limits: limits.clone(),
+                ..Default::default()
+            })
+            .await
+            .map_err(|source| GpuError::Device {
+                adapter: adapter_info.name.clone(),
+                source,
+            })?;
+        let uncaptured = Arc::new(Mutex::new(Vec::new()));
+        let sink = uncaptured.clone();
+        device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+            if let Ok(mut v) = sink.lock() {
+                v.push(e.to_string());
+            }
+        }));
+        Ok(Self {
+            device,
+            queue,
+            adapter_info,
+            limits,
+            uncaptured,
+        })
+    }
+
+    /// One line describing the adapter, e.g. "llvmpipe (LLVM 15.0.6, 256
+    /// bits) (Vulkan, Cpu)".
+    pub fn describe(&self) -> String {
+        format!(
+            "{} ({:?}, {:?})",
+            self.adapter_info.name, self.adapter_info.backend, self.adapter_info.device_type
+        )
+    }
+
+    /// Whether the adapter is a software rasteriser (lavapipe, llvmpipe,
+    /// WARP): timings then measure the CPU, not a GPU.
+    pub fn is_software(&self) -> bool {
+        self.adapter_info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    /// Fails with [`GpuError::TooLarge`] if a storage buffer of `bytes`
+    /// cannot be bound on this device.
+    pub fn check_storage_size(&self, what: &str, bytes: u64) -> Result<(), GpuError> {
+        let checks = [
+            (
+                "max_storage_buffer_binding_size",
+                self.limits.max_storage_buffer_binding_size,
+            ),
+            ("max_buffer_size", self.limits.max_buffer_size),
+        ];
+        for (limit, max) in checks {
+            if bytes > max {
+                return Err(GpuError::TooLarge {
+                    what: what.to_owned(),
+                    bytes,
+                    limit,
+                    max,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The oldest error wgpu reported outside an error scope since the last
+    /// call, as a [`GpuError`] about `context`.
+    pub fn take_error(&self, context: &str) -> Result<(), GpuError> {
+        let first = match self.uncaptured.lock() {
+            Ok(mut v) => {
+                let first = v.first().cloned();
+                v.clear();
+                first
+            }
+            Err(_) => None,
+        };
+        match first {
+            Some(message) => Err(GpuError::Wgpu {
+                context: context.to_owned(),
+                message,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Runs `f` inside a validation and out-of-memory error scope and
+    /// returns its result, or the first error wgpu reported meanwhile.
+    pub fn scoped<T>(&self, context: &str, f: impl FnOnce() -> T) -> Result<T, GpuError> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let value = f();
+        let errors = [
+            pollster::block_on(validation.pop()),
+            pollster::block_on(oom.pop()),
+        ];
+        match errors.into_iter().flatten().next() {
+            Some(e) => Err(GpuError::Wgpu {
+                context: context.to_owned(),
+                message: e.to_string(),
+            }),
+            None => Ok(value),
+        }
+    }
+
+    /// Blocks until the queue has finished all submitted work.
+    pub fn wait_idle(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Wgpu {
+                context: "waiting for the GPU".to_owned(),
+                message: e.to_string(),
+            })?;
+        self.take_error("GPU work")
+    }
+}
+
+/// The first adapter whose name contains `name` (case-insensitive).
+async fn pick_named(instance: &wgpu::Instance, name: &str) -> Option<wgpu::Adapter> {
+    let name = name.to_lowercase();
+    instance
+        .enumerate_adapters(wgpu::Backends::all())
+        .await
+        .into_iter()
+        .find(|a| a.get_info().name.to_lowercase().contains(&name))
+}

@@ -1,0 +1,161 @@
+//! The final gather of the internal-lights method (METHOD.md §6) on the
+//! GPU, with the internal lights built on the CPU
+//! ([`InternalLights::build`]: placement and time-gated walks stay there)
+//! and uploaded once: positions and weights, the SH coefficients of the
+//! multiply scattered part of `J`, the light arriving at each light from
+//! the external ones, and both spatial indices of
+//! `physics::light_index` (the fine grid of the kernel reconstruction and
+//! the cluster grid of the light selection).
+//!
+//! To stay within the eight storage buffers per shader stage that every
+//! device offers, the tables are packed into two buffers, `vec4` data and
+//! 32-bit words, at offsets given in [`GpuGatherParams`]; the layout is
+//! written out in `shaders/common/internal_data.wgsl`.
+
+use super::context::{GpuContext, GpuError};
+use super::mirrors::{GpuGatherParams, CLOCK_GEOMETRIC, CLOCK_OPTICAL_DEPTH};
+use super::renderer::{storage_buffer, GpuRenderer};
+use super::shaders::GATHER_MODULE;
+use crate::physics::gated_walk::Clock;
+use crate::physics::internal::{InternalLights, L1Form};
+use crate::render::Prepared;
+
+/// The cached lights packed for the GPU.
+pub struct PackedLights {
+    /// Constants and table offsets.
+    pub params: GpuGatherParams,
+    /// Per light two vec4, then SH coefficients, then arriving light.
+    pub vec4: Vec<[f32; 4]>,
+    /// Grid starts and ids, powers (f32 bits), live clusters.
+    pub words: Vec<u32>,
+}
+
+/// Packs `cache` for `shaders/common/internal_data.wgsl`, with
+/// `light_samples` internal-light samples per camera sample.
+pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
+    let n = cache.lights.len();
+    let mut vec4: Vec<[f32; 4]> = Vec::new();
+    let lights_offset = vec4.len() as u32;
+    for (l, scale) in cache.lights.iter().zip(&cache.recon_scale) {
+        let p = l.position;
+        vec4.push([p.x, p.y, p.z, l.density]);
+        vec4.push([l.weight, *scale, 0.0, 0.0]);
+    }
+    let multi_offset = vec4.len() as u32;
+    vec4.extend(cache.multi_coeffs.iter().map(|c| [c.x, c.y, c.z, 0.0]));
+    let arrival_offset = vec4.len() as u32;
+    vec4.extend(cache.arrival.iter().map(|c| [c.x, c.y, c.z, 0.0]));
+    if vec4.is_empty() {
+        vec4.push([0.0; 4]);
+    }
+
+    let mut words: Vec<u32> = Vec::new();
+    let mut table = |data: &mut dyn Iterator<Item = u32>| {
+        let offset = words.len() as u32;
+        words.extend(data);
+        offset
+    };
+    let fine = &cache.fine;
+    let clusters = &cache.clusters;
+    let fine_starts_offset = table(&mut fine.starts().iter().copied());
+    let fine_ids_offset = table(&mut fine.ids().iter().copied());
+    let cluster_starts_offset = table(&mut clusters.starts().iter().copied());
+    let cluster_ids_offset = table(&mut clusters.ids().iter().copied());
+    let cluster_power_offset = table(&mut cache.cluster_power.iter().map(|p| p.to_bits()));
+    let light_power_offset = table(&mut cache.light_power.iter().map(|p| p.to_bits()));
+    let live_offset = table(&mut cache.live_clusters.iter().copied());
+    if words.is_empty() {
+        words.push(0);
+    }
+
+    let params = GpuGatherParams {
+        scatter: cache.scatter.to_array(),
+        g: cache.g,
+        fine_min: fine.min().to_array(),
+        s_star: cache.s_star,
+        fine_cell: fine.cell_size().to_array(),
+        kernel_radius: cache.kernel_radius,
+        fine_res: fine.resolution().to_array(),
+        softening: cache.softening,
+        cluster_min: clusters.min().to_array(),
+        sigma_grey: cache.sigma_grey,
+        cluster_cell: clusters.cell_size().to_array(),
+        clock: match cache.params.clock {
+            Clock::Geometric => CLOCK_GEOMETRIC,
+            Clock::OpticalDepth => CLOCK_OPTICAL_DEPTH,
+        },
+        cluster_res: clusters.resolution().to_array(),
+        sh_order: cache.sh_order,
+        sh_count: cache.sh_count as u32,
+        light_count: n as u32,
+        external_count: (cache.arrival.len() / n.max(1)) as u32,
+        light_samples,
+        lights_offset,
+        multi_offset,
+        arrival_offset,
+        live_count: cache.live_clusters.len() as u32,
+        fine_starts_offset,
+        fine_ids_offset,
+        cluster_starts_offset,
+        cluster_ids_offset,
+        cluster_power_offset,
+        light_power_offset,
+        live_offset,
+        _pad0: 0,
+    };
+    PackedLights {
+        params,
+        vec4,
+        words,
+    }
+}
+
+impl GpuRenderer {
+    /// The internal-lights method's final gather with lights already built
+    /// on the CPU for this scene (`cache`), `light_samples` internal-light
+    /// samples per camera sample (the setting `light_samples`), and `seed`
+    /// for the random streams, as on the CPU.
+    pub fn internal(
+        ctx: &GpuContext,
+        prepared: &Prepared,
+        cache: &InternalLights,
+        light_samples: u32,
+        seed: u64,
+    ) -> Result<Self, GpuError> {
+        use wgpu::util::DeviceExt;
+        if cache.params.l1 != L1Form::Points {
+            return Err(GpuError::Unsupported(
+                "the field form of L1 (run with --l1 points)",
+            ));
+        }
+        let packed = pack_lights(cache, light_samples);
+        let params = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("gather uniform"),
+                contents: bytemuck::bytes_of(&packed.params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+        let vec4 = storage_buffer(
+            ctx,
+            "internal lights (vec4 tables)",
+            bytemuck::cast_slice(&packed.vec4),
+            wgpu::BufferUsages::empty(),
+        )?;
+        let words = storage_buffer(
+            ctx,
+            "internal lights (index tables)",
+            bytemuck::cast_slice(&packed.words),
+            wgpu::BufferUsages::empty(),
+        )?;
+        let bytes = params.size() + vec4.size() + words.size();
+        Self::build(
+            ctx,
+            prepared,
+            seed,
+            &GATHER_MODULE,
+            &[(6, &params), (7, &vec4), (8, &words)],
+            bytes,
+        )
+    }
+}

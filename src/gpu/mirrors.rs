@@ -1,0 +1,378 @@
+//! GPU mirrors of the data the shaders read: `#[repr(C)]`, `bytemuck::Pod`
+//! structs with explicit padding, laid out as WGSL lays out the structs of
+//! `shaders/common/scene.wgsl` and `shaders/common/accumulate.wgsl` (a
+//! `vec3<f32>` is 16-byte aligned and 12 bytes long, so each one is followed
+//! by a 4-byte scalar or a padding field). Every struct carries a
+//! compile-time size check; change a field here and in the shader together.
+//!
+//! The conversions from the prepared scene live here too, so that what the
+//! GPU sees is defined in one place (METHOD.md §1: the medium, its box and
+//! majorants, the external lights).
+
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+use crate::physics::lights::Lights;
+use crate::physics::majorant::MajorantGrid;
+use crate::render::SceneVolume;
+use crate::scene::{CameraFrame, Density};
+
+/// Density-source tags (keep in sync with `DENSITY_*` in
+/// `shaders/common/scene.wgsl`).
+pub const DENSITY_SPHERE: u32 = 0;
+/// A box of density one.
+pub const DENSITY_BOX: u32 = 1;
+/// A voxel grid in the density buffer.
+pub const DENSITY_GRID: u32 = 2;
+/// Light tags (keep in sync with `LIGHT_*` in `shaders/common/scene.wgsl`).
+pub const LIGHT_SUN: u32 = 0;
+/// A point light.
+pub const LIGHT_POINT: u32 = 1;
+
+/// The camera frame. Keep in sync with `Camera` in
+/// `shaders/common/scene.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuCamera {
+    /// Pinhole position.
+    pub eye: [f32; 3],
+    /// Image width in pixels.
+    pub width: u32,
+    /// Unit view direction.
+    pub forward: [f32; 3],
+    /// Image height in pixels.
+    pub height: u32,
+    /// Right vector scaled by the half-width of the image plane.
+    pub right_scaled: [f32; 3],
+    /// Padding.
+    pub _pad0: u32,
+    /// Up vector scaled by the half-height of the image plane.
+    pub up_scaled: [f32; 3],
+    /// Padding.
+    pub _pad1: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuCamera>() == 64);
+
+/// The medium: optics, box, density source (a tagged union) and majorant
+/// grid. Keep in sync with `Medium` in `shaders/common/scene.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuMedium {
+    /// Extinction per unit density, RGB.
+    pub sigma_t: [f32; 3],
+    /// One of `DENSITY_*`.
+    pub density_kind: u32,
+    /// Single-scattering albedo, RGB.
+    pub albedo: [f32; 3],
+    /// Henyey–Greenstein asymmetry.
+    pub g: f32,
+    /// Minimum corner of the medium's box.
+    pub bounds_min: [f32; 3],
+    /// Padding.
+    pub _pad0: u32,
+    /// Maximum corner of the medium's box.
+    pub bounds_max: [f32; 3],
+    /// Padding.
+    pub _pad1: u32,
+    /// Sphere centre, box minimum, or grid box minimum.
+    pub shape_a: [f32; 3],
+    /// Sphere radius (unused otherwise).
+    pub radius: f32,
+    /// Box maximum or grid box maximum (unused for a sphere).
+    pub shape_b: [f32; 3],
+    /// Padding.
+    pub _pad2: u32,
+    /// Voxels along x, y, z (ones unless a grid).
+    pub grid_dims: [u32; 3],
+    /// Padding.
+    pub _pad3: u32,
+    /// Majorant cells along x, y, z.
+    pub majorant_res: [u32; 3],
+    /// Padding.
+    pub _pad4: u32,
+    /// Minimum corner of the majorant grid.
+    pub majorant_min: [f32; 3],
+    /// Padding.
+    pub _pad5: u32,
+    /// Maximum corner of the majorant grid.
+    pub majorant_max: [f32; 3],
+    /// Padding.
+    pub _pad6: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuMedium>() == 160);
+
+/// Everything constant during a render (a uniform buffer). Keep in sync
+/// with `Scene` in `shaders/common/scene.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuScene {
+    /// Ray generation.
+    pub camera: GpuCamera,
+    /// The medium.
+    pub medium: GpuMedium,
+    /// Number of suns (first in the light buffer).
+    pub sun_count: u32,
+    /// Number of point lights (after the suns).
+    pub point_count: u32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuScene>() == 240);
+
+/// What changes from pass to pass (a uniform buffer). Keep in sync with
+/// `PassParams` in `shaders/common/scene.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct GpuPassParams {
+    /// Low 32 bits of the render's seed.
+    pub seed_lo: u32,
+    /// High 32 bits of the render's seed.
+    pub seed_hi: u32,
+    /// Pass number: selects the random streams.
+    pub pass_index: u32,
+    /// Samples per pixel once this pass is added (1 for the first).
+    pub sample_count: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuPassParams>() == 16);
+
+/// An external light. Keep in sync with `Light` in
+/// `shaders/common/scene.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuLight {
+    /// Sun: unit direction of travel; point: position.
+    pub vector: [f32; 3],
+    /// One of `LIGHT_*`.
+    pub kind: u32,
+    /// Sun: irradiance; point: intensity (W/sr). RGB.
+    pub power: [f32; 3],
+    /// Padding.
+    pub _pad0: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
+
+/// Clock tags (keep in sync with `CLOCK_*` in
+/// `shaders/common/internal_data.wgsl`).
+pub const CLOCK_GEOMETRIC: u32 = 0;
+/// The optical-depth clock.
+pub const CLOCK_OPTICAL_DEPTH: u32 = 1;
+
+/// Constants of the cached internal lights and the offsets of their tables
+/// in the two packed buffers (see `gpu::gather`). Keep in sync with
+/// `GatherParams` in `shaders/common/internal_data.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuGatherParams {
+    /// `α σ_t` per unit density.
+    pub scatter: [f32; 3],
+    /// Henyey–Greenstein asymmetry.
+    pub g: f32,
+    /// Fine light grid: minimum corner.
+    pub fine_min: [f32; 3],
+    /// Window length `s*`.
+    pub s_star: f32,
+    /// Fine light grid: cell size.
+    pub fine_cell: [f32; 3],
+    /// Reconstruction kernel radius `h`.
+    pub kernel_radius: f32,
+    /// Fine light grid: cells per axis.
+    pub fine_res: [u32; 3],
+    /// `L₁`'s kernel softening `h₁`.
+    pub softening: f32,
+    /// Cluster grid: minimum corner.
+    pub cluster_min: [f32; 3],
+    /// `max(σ_t)`.
+    pub sigma_grey: f32,
+    /// Cluster grid: cell size.
+    pub cluster_cell: [f32; 3],
+    /// One of `CLOCK_*`.
+    pub clock: u32,
+    /// Cluster grid: cells per axis.
+    pub cluster_res: [u32; 3],
+    /// SH order.
+    pub sh_order: u32,
+    /// SH coefficients per light.
+    pub sh_count: u32,
+    /// Number of internal lights.
+    pub light_count: u32,
+    /// Arriving lights stored per internal light.
+    pub external_count: u32,
+    /// Internal-light samples per camera sample.
+    pub light_samples: u32,
+    /// Vec4 table offsets: lights, SH coefficients, arriving light.
+    pub lights_offset: u32,
+    /// See `lights_offset`.
+    pub multi_offset: u32,
+    /// See `lights_offset`.
+    pub arrival_offset: u32,
+    /// Number of live clusters.
+    pub live_count: u32,
+    /// Word table offsets: fine grid starts.
+    pub fine_starts_offset: u32,
+    /// Fine grid ids.
+    pub fine_ids_offset: u32,
+    /// Cluster grid starts.
+    pub cluster_starts_offset: u32,
+    /// Cluster grid ids.
+    pub cluster_ids_offset: u32,
+    /// Cluster powers (f32 bits).
+    pub cluster_power_offset: u32,
+    /// Per-slot light powers (f32 bits).
+    pub light_power_offset: u32,
+    /// Live clusters.
+    pub live_offset: u32,
+    /// Padding.
+    pub _pad0: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 176);
+
+/// One pixel's running statistics on the GPU: Welford mean and sum of
+/// squared deviations of the estimate, and the mean of its single-scattering
+/// part (`w` unused). Keep in sync with `Accum` in
+/// `shaders/common/accumulate.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuAccum {
+    /// Running mean of the estimate.
+    pub mean: [f32; 4],
+    /// Sum of squared deviations from the running mean.
+    pub m2: [f32; 4],
+    /// Running mean of the single-scattering part.
+    pub single_mean: [f32; 4],
+}
+const _: () = assert!(std::mem::size_of::<GpuAccum>() == 48);
+
+impl GpuCamera {
+    /// The GPU form of a camera frame.
+    pub fn new(c: &CameraFrame) -> Self {
+        Self {
+            eye: c.eye.to_array(),
+            width: c.width,
+            forward: c.forward.to_array(),
+            height: c.height,
+            right_scaled: c.right_scaled.to_array(),
+            up_scaled: c.up_scaled.to_array(),
+            ..Self::default()
+        }
+    }
+}
+
+impl GpuMedium {
+    /// The GPU form of a volume; its voxels (for a grid) go in a separate
+    /// buffer (see [`density_voxels`]).
+    pub fn new(volume: &SceneVolume) -> Self {
+        let MajorantGrid { res, min, max, .. } = volume.majorants;
+        let mut m = Self {
+            sigma_t: volume.optics.sigma_t.to_array(),
+            albedo: volume.optics.albedo.to_array(),
+            g: volume.optics.g,
+            bounds_min: volume.bounds.0.to_array(),
+            bounds_max: volume.bounds.1.to_array(),
+            grid_dims: [1; 3],
+            majorant_res: res.to_array(),
+            majorant_min: min.to_array(),
+            majorant_max: max.to_array(),
+            ..Self::default()
+        };
+        match &volume.density {
+            Density::Sphere { center, radius } => {
+                m.density_kind = DENSITY_SPHERE;
+                m.shape_a = center.to_array();
+                m.radius = *radius;
+            }
+            Density::Box { min, max } => {
+                m.density_kind = DENSITY_BOX;
+                m.shape_a = min.to_array();
+                m.shape_b = max.to_array();
+            }
+            Density::Grid(g) => {
+                m.density_kind = DENSITY_GRID;
+                m.shape_a = g.bounds_min.to_array();
+                m.shape_b = g.bounds_max.to_array();
+                m.grid_dims = g.dims.to_array();
+            }
+        }
+        m
+    }
+}
+
+/// The voxels the density buffer holds: the grid's, x fastest, or one
+/// unused zero for analytic shapes (a binding cannot be empty).
+pub fn density_voxels(density: &Density) -> &[f32] {
+    match density {
+        Density::Grid(g) => &g.data,
+        _ => &[0.0],
+    }
+}
+
+/// The lights as the GPU reads them, suns first (the order in which
+/// [`Lights::for_each_at`] visits them); one unused element if there are
+/// none (a binding cannot be empty).
+pub fn gpu_lights(lights: &Lights) -> Vec<GpuLight> {
+    let suns = lights.suns.iter().map(|s| GpuLight {
+        vector: s.direction.to_array(),
+        kind: LIGHT_SUN,
+        power: s.irradiance.to_array(),
+        _pad0: 0,
+    });
+    let points = lights.points.iter().map(|p| GpuLight {
+        vector: p.position.to_array(),
+        kind: LIGHT_POINT,
+        power: p.intensity.to_array(),
+        _pad0: 0,
+    });
+    let mut out: Vec<GpuLight> = suns.chain(points).collect();
+    if out.is_empty() {
+        out.push(GpuLight::default());
+    }
+    out
+}
+
+impl GpuScene {
+    /// The constant data of a render.
+    pub fn new(camera: &CameraFrame, volume: &SceneVolume, lights: &Lights) -> Self {
+        Self {
+            camera: GpuCamera::new(camera),
+            medium: GpuMedium::new(volume),
+            sun_count: lights.suns.len() as u32,
+            point_count: lights.points.len() as u32,
+            ..Self::default()
+        }
+    }
+}
+
+impl GpuAccum {
+    /// The running mean of the estimate.
+    pub fn mean(&self) -> Vec3 {
+        Vec3::from_slice(&self.mean[..3])
+    }
+
+    /// The sum of squared deviations of the estimate.
+    pub fn m2(&self) -> Vec3 {
+        Vec3::from_slice(&self.m2[..3])
+    }
+
+    /// The running mean of the single-scattering part.
+    pub fn single_mean(&self) -> Vec3 {
+        Vec3::from_slice(&self.single_mean[..3])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Field offsets that WGSL's layout rules fix (a `vec3<f32>` at a
+    /// multiple of 16, the scalar after it at +12).
+    #[test]
+    fn offsets_follow_wgsl_layout() {
+        assert_eq!(std::mem::offset_of!(GpuScene, medium), 64);
+        assert_eq!(std::mem::offset_of!(GpuScene, sun_count), 224);
+        assert_eq!(std::mem::offset_of!(GpuMedium, g), 28);
+        assert_eq!(std::mem::offset_of!(GpuMedium, grid_dims), 96);
+        assert_eq!(std::mem::offset_of!(GpuMedium, majorant_max), 144);
+        assert_eq!(std::mem::offset_of!(GpuLight, power), 16);
+    }
+}

@@ -1,0 +1,24 @@
+//! The wgpu backend: the estimators of `physics/` as WGSL compute shaders
+//! (in `shaders/`, organised like `src/physics/`), run headless or beside
+//! the previewer, with progressive accumulation on the GPU.
+//!
+//! - [`context`]: instance → adapter → device, headless; errors.
+//! - [`mirrors`]: `#[repr(C)]` twins of the shader structs, size-checked.
+//! - [`shaders`]: the WGSL files and how modules are assembled from them.
+//! - [`renderer`]: progressive rendering, one dispatch per pass,
+//!   accumulating on the GPU; the reference path tracer (METHOD.md §2).
+//! - [`gather`]: the internal-lights final gather (METHOD.md §6) with the
+//!   lights built on the CPU and uploaded with their SH coefficients and
+//!   spatial indices.
+//!
+//! Still on the CPU only: placing the internal lights and their time-gated
+//! walks (METHOD.md §4–§5).
+
+pub mod context;
+pub mod gather;
+pub mod mirrors;
+pub mod renderer;
+pub mod shaders;
+
+pub use context::{GpuContext, GpuError};
+pub use renderer::{GpuImage, GpuRenderer};

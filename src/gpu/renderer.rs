@@ -1,0 +1,384 @@
+//! Progressive rendering on the GPU: one compute dispatch per pass adds one
+//! sample per pixel to a per-pixel running mean and variance that stays in
+//! GPU memory; the image is read back only for export and tests. One
+//! [`GpuRenderer`] serves both estimators; they differ in their shader
+//! module and the buffers bound after the scene's.
+//!
+//! The reference method (METHOD.md §2, `shaders/common/reference.wgsl`,
+//! entry point in `shaders/reference/main.wgsl`) mirrors
+//! `cpu::Renderer::pass`: the same random stream per (seed, pixel, pass),
+//! the same pixel jitter, the same estimator (`physics::reference`), so the
+//! two backends agree statistically (not bitwise: `exp`, `log` and fused
+//! operations differ). The internal-lights gather is in [`super::gather`].
+
+use glam::Vec3;
+use wgpu::util::DeviceExt;
+
+use super::context::{GpuContext, GpuError};
+use super::mirrors::{density_voxels, gpu_lights, GpuAccum, GpuPassParams, GpuScene};
+use super::shaders::{ModuleSource, REFERENCE_MODULE};
+use crate::render::{Film, Prepared};
+
+/// Workgroup side in pixels; keep in sync with `WORKGROUP_SIDE` in
+/// `shaders/reference/main.wgsl`.
+pub const WORKGROUP_SIDE: u32 = 8;
+
+/// A compute pipeline built from one assembled module, with its bind-group
+/// layout taken from the shader.
+pub(crate) fn compute_pipeline(
+    ctx: &GpuContext,
+    module: &ModuleSource,
+) -> Result<wgpu::ComputePipeline, GpuError> {
+    let source = module.assemble();
+    ctx.scoped(&format!("building the {} shader", module.name), || {
+        let shader = ctx
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(module.name),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+        ctx.device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(module.name),
+                layout: None,
+                module: &shader,
+                entry_point: Some(module.entry_point),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+    })
+}
+
+/// A storage buffer holding `data`, after checking that the device can bind
+/// it.
+pub(crate) fn storage_buffer(
+    ctx: &GpuContext,
+    label: &str,
+    data: &[u8],
+    extra_usage: wgpu::BufferUsages,
+) -> Result<wgpu::Buffer, GpuError> {
+    ctx.check_storage_size(label, data.len() as u64)?;
+    Ok(ctx
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: data,
+            usage: wgpu::BufferUsages::STORAGE | extra_usage,
+        }))
+}
+
+/// The scene's constant buffers (bindings 0–4 of `shaders/common/scene.wgsl`).
+pub(crate) struct SceneBuffers {
+    /// `Scene` uniform.
+    pub scene: wgpu::Buffer,
+    /// `PassParams` uniform, rewritten before every pass.
+    pub pass: wgpu::Buffer,
+    /// Density voxels.
+    pub density: wgpu::Buffer,
+    /// Majorant per coarse cell.
+    pub majorants: wgpu::Buffer,
+    /// External lights.
+    pub lights: wgpu::Buffer,
+    /// Bytes held on the GPU by these buffers.
+    pub bytes: u64,
+}
+
+impl SceneBuffers {
+    /// Uploads the prepared scene.
+    pub fn new(ctx: &GpuContext, prepared: &Prepared) -> Result<Self, GpuError> {
+        let vol = &prepared.volume;
+        let scene_data = GpuScene::new(&prepared.camera, vol, &prepared.lights);
+        let voxels = density_voxels(&vol.density);
+        let lights = gpu_lights(&prepared.lights);
+        let density = storage_buffer(
+            ctx,
+            "density grid",
+            bytemuck::cast_slice(voxels),
+            wgpu::BufferUsages::empty(),
+        )?;
+        let majorants = storage_buffer(
+            ctx,
+            "majorant grid",
+            bytemuck::cast_slice(&vol.majorants.values),
+            wgpu::BufferUsages::empty(),
+        )?;
+        let lights_buf = storage_buffer(
+            ctx,
+            "light list",
+            bytemuck::cast_slice(&lights),
+            wgpu::BufferUsages::empty(),
+        )?;
+        let scene = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("scene uniform"),
+                contents: bytemuck::bytes_of(&scene_data),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+        let pass = ctx
+            .device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("pass uniform"),
+                contents: bytemuck::bytes_of(&GpuPassParams::default()),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            });
+        let bytes =
+            density.size() + majorants.size() + lights_buf.size() + scene.size() + pass.size();
+        Ok(Self {
+            scene,
+            pass,
+            density,
+            majorants,
+            lights: lights_buf,
+            bytes,
+        })
+    }
+
+    /// Bind-group entries 0–4.
+    pub fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 5] {
+        [
+            (0, &self.scene),
+            (1, &self.pass),
+            (2, &self.density),
+            (3, &self.majorants),
+            (4, &self.lights),
+        ]
+        .map(|(binding, buffer)| wgpu::BindGroupEntry {
+            binding,
+            resource: buffer.as_entire_binding(),
+        })
+    }
+}
+
+/// Copies `buffer` (which must have `COPY_SRC`) to the CPU.
+pub(crate) fn read_buffer<T: bytemuck::Pod>(
+    ctx: &GpuContext,
+    buffer: &wgpu::Buffer,
+    what: &'static str,
+) -> Result<Vec<T>, GpuError> {
+    let size = buffer.size();
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("read-back staging"),
+        size,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("read-back"),
+        });
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
+    ctx.queue.submit([encoder.finish()]);
+    let (sender, receiver) = std::sync::mpsc::channel();
+    staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = sender.send(r);
+    });
+    ctx.wait_idle()?;
+    let readback = |message: String| GpuError::Readback { what, message };
+    receiver
+        .recv()
+        .map_err(|e| readback(e.to_string()))?
+        .map_err(|e| readback(e.to_string()))?;
+    let data = {
+        let view = staging
+            .get_mapped_range(..)
+            .map_err(|e| readback(e.to_string()))?;
+        bytemuck::pod_collect_to_vec(&view)
+    };
+    staging.unmap();
+    Ok(data)
+}
+
+/// The accumulated image read back from the GPU.
+#[derive(Clone, Debug)]
+pub struct GpuImage {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Samples per pixel accumulated.
+    pub samples: u32,
+    /// Per-pixel running statistics, rows top to bottom.
+    pub pixels: Vec<GpuAccum>,
+}
+
+impl GpuImage {
+    /// The estimate as a film (means and variances as if accumulated on the
+    /// CPU).
+    pub fn film(&self) -> Film {
+        let mean: Vec<Vec3> = self.pixels.iter().map(GpuAccum::mean).collect();
+        let m2: Vec<Vec3> = self.pixels.iter().map(GpuAccum::m2).collect();
+        Film::from_moments(self.width, self.height, self.samples, &mean, &m2)
+    }
+
+    /// The single-scattering part's mean image.
+    pub fn single_mean(&self) -> Vec<Vec3> {
+        self.pixels.iter().map(GpuAccum::single_mean).collect()
+    }
+}
+
+/// A progressive GPU renderer for one prepared scene and one estimator.
+pub struct GpuRenderer {
+    ctx: GpuContext,
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    buffers: SceneBuffers,
+    accum: wgpu::Buffer,
+    width: u32,
+    height: u32,
+    seed: u64,
+    samples: u32,
+    label: &'static str,
+}
+
+impl GpuRenderer {
+    /// The reference path tracer: uploads the scene and builds the
+    /// pipeline; `seed` selects the random streams, as on the CPU.
+    pub fn reference(ctx: &GpuContext, prepared: &Prepared, seed: u64) -> Result<Self, GpuError> {
+        Self::build(ctx, prepared, seed, &REFERENCE_MODULE, &[], 0)
+    }
+
+    /// A renderer running `module` over the scene's buffers (bindings
+    /// 0–4), the accumulation (5) and `extra` (binding, buffer) pairs
+    /// holding `extra_bytes`.
+    pub(crate) fn build(
+        ctx: &GpuContext,
+        prepared: &Prepared,
+        seed: u64,
+        module: &ModuleSource,
+        extra: &[(u32, &wgpu::Buffer)],
+        extra_bytes: u64,
+    ) -> Result<Self, GpuError> {
+        let (width, height) = (prepared.camera.width, prepared.camera.height);
+        let pipeline = compute_pipeline(ctx, module)?;
+        let mut buffers = SceneBuffers::new(ctx, prepared)?;
+        buffers.bytes += extra_bytes;
+        let pixels = width as u64 * height as u64;
+        let accum_bytes = pixels * std::mem::size_of::<GpuAccum>() as u64;
+        ctx.check_storage_size("accumulation buffer", accum_bytes)?;
+        let label = module.name;
+        let (accum, bind_group) = ctx.scoped("allocating the accumulation buffer", || {
+            let accum = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: accum_bytes.max(16),
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_SRC
+                    | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut entries = buffers.entries().to_vec();
+            entries.push(wgpu::BindGroupEntry {
+                binding: 5,
+                resource: accum.as_entire_binding(),
+            });
+            for &(binding, buffer) in extra {
+                entries.push(wgpu::BindGroupEntry {
+                    binding,
+                    resource: buffer.as_entire_binding(),
+                });
+            }
+            let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &entries,
+            });
+            (accum, bind_group)
+        })?;
+        Ok(Self {
+            ctx: ctx.clone(),
+            pipeline,
+            bind_group,
+            buffers,
+            accum,
+            width,
+            height,
+            seed,
+            samples: 0,
+            label,
+        })
+    }
+
+    /// Samples per pixel accumulated so far (passes enqueued).
+    pub fn samples(&self) -> u32 {
+        self.samples
+    }
+
+    /// Image size in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// Bytes this renderer holds in GPU memory (scene, majorants, lights,
+    /// accumulation).
+    pub fn gpu_bytes(&self) -> u64 {
+        self.buffers.bytes + self.accum.size()
+    }
+
+    /// Enqueues pass number `pass_index` (which selects the random streams,
+    /// like `cpu::Renderer::pass`): one sample per pixel, accumulated on the
+    /// GPU. Does not wait for it; see [`GpuRenderer::finish`].
+    pub fn add_pass(&mut self, pass_index: u32) {
+        self.samples += 1;
+        let params = GpuPassParams {
+            seed_lo: self.seed as u32,
+            seed_hi: (self.seed >> 32) as u32,
+            pass_index,
+            sample_count: self.samples,
+        };
+        let ctx = &self.ctx;
+        ctx.queue
+            .write_buffer(&self.buffers.pass, 0, bytemuck::bytes_of(&params));
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some(self.label),
+            });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(self.label),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(
+                self.width.div_ceil(WORKGROUP_SIDE),
+                self.height.div_ceil(WORKGROUP_SIDE),
+                1,
+            );
+        }
+        ctx.queue.submit([encoder.finish()]);
+    }
+
+    /// Blocks until every enqueued pass has finished.
+    pub fn finish(&self) -> Result<(), GpuError> {
+        self.ctx.wait_idle()
+    }
+
+    /// Clears the accumulation and selects new random streams with `seed`
+    /// (a new render of the same scene).
+    pub fn reset(&mut self, seed: u64) {
+        self.seed = seed;
+        let mut encoder = self
+            .ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some(self.label),
+            });
+        encoder.clear_buffer(&self.accum, 0, None);
+        self.ctx.queue.submit([encoder.finish()]);
+        self.samples = 0;
+    }
+
+    /// Waits for the enqueued passes and reads the accumulated image back.
+    pub fn read_back(&self) -> Result<GpuImage, GpuError> {
+        let pixels = read_buffer(&self.ctx, &self.accum, "the accumulation buffer")?;
+        let n = self.width as usize * self.height as usize;
+        Ok(GpuImage {
+            width: self.width,
+            height: self.height,
+            samples: self.samples,
+            pixels: pixels.into_iter().take(n).collect(),
+        })
+    }
+}
