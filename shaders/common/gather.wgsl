@@ -1,12 +1,23 @@
 // The final gather of the internal-lights method (METHOD.md §6). Mirrors
-// `gather` in src/physics/gather.rs, part for part: `single` (the k = 0
-// part of L₀: one collision in the window, next-event estimation),
-// `reconstructed` (the k ≥ 1 part of L₀ from the kernel reconstruction at
-// stratified points) and `internal` (L₁: one light per sample, a cluster
-// ∝ P_c / (d_c² + h²) and a light ∝ V_i J̄_i, equiangular sampling of the
-// ray about it). The CPU keeps the clusters' running sums in a vector;
-// here the selection scans the live clusters again with the same
-// arithmetic, which picks the same cluster without per-thread storage.
+// `gather` and `field_l1_at` in src/physics/gather.rs, part for part. The
+// window `[0, w]` of the camera ray is cut into `samples` strata with one
+// jittered point `y` each (transmittance `T(x, y)` by ratio tracking):
+//
+// - `single`: the k = 0 part of L₀, `∫ T b S₁ dt`, a marched single
+//   scatter with `S₁(y)` by next-event estimation at every point.
+// - `reconstructed`: the k ≥ 1 part of L₀, `∫ T Ĵ dt` with `Ĵ` the kernel
+//   reconstruction (`reconstruct_multi`).
+// - `internal`: L₁, in the form `gather_params.l1_form` says:
+//   - field (`L1_FIELD`, default): at each point `y`, one scattering of
+//     the reconstructed field `J = S₁ + Ĵ` at `x' = y − r n'`, `n'` drawn
+//     from the phase function and `r` uniform up to where the clock's
+//     budget runs out (`field_l1_at`); the point-light loop is skipped.
+//   - points (`L1_POINTS`, the note's eq. 23): one light per sample, a
+//     cluster ∝ P_c / (d_c² + h₁²) and a light ∝ V_i J̄_i, equiangular
+//     sampling of the ray about it. The CPU keeps the clusters' running
+//     sums in a vector; here the selection scans the live clusters again
+//     with the same arithmetic, which picks the same cluster without
+//     per-thread storage.
 
 // One gather estimate, by part (`GatherSample`).
 struct GatherSample {
@@ -70,30 +81,37 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     }
     let n = -dir;
 
-    // L₀, k = 0: one collision inside the window, next-event estimation.
-    var weight = vec3<f32>(1.0);
-    let flight = free_flight(x, dir, 0.0, window, &weight, rng);
-    if flight.hit {
-        let y = x + dir * flight.t;
-        out.single = weight * scene.medium.albedo * single_scatter_source(y, n, rng);
-    }
-
+    let field = gather_params.l1_form == L1_FIELD;
     let samples = max(samples_in, 1u);
-    // L₀, k ≥ 1: stratified points, ratio-tracked transmittance.
+    // L₀ (both parts) and, for the field form, L₁: stratified points of
+    // the window, ratio-tracked transmittance from `x`.
     let step = window / f32(samples);
     for (var j = 0u; j < samples; j++) {
         let t = (f32(j) + rng_next_f32(rng)) * step;
         let y = x + dir * t;
         let rho = density(y);
         let j_hat = reconstruct_multi(y, n, rho);
-        if all(j_hat == vec3<f32>(0.0)) {
+        var s1 = vec3<f32>(0.0);
+        var l1 = vec3<f32>(0.0);
+        if rho > 0.0 {
+            s1 = gather_params.scatter * rho * single_scatter_source(y, n, rng);
+            if field {
+                l1 = field_l1_at(x, dir, n, t, len, y, rho, rng);
+            }
+        }
+        if all(j_hat == vec3<f32>(0.0)) && all(l1 == vec3<f32>(0.0)) && all(s1 == vec3<f32>(0.0)) {
             continue;
         }
         let tr = transmittance(x, dir, t, rng);
         out.reconstructed += tr * j_hat * step;
+        out.internal += tr * l1 * step;
+        out.single += tr * s1 * step;
+    }
+    if field {
+        return out;
     }
 
-    // L₁: internal lights.
+    // L₁ as the note writes it: a sum over the internal lights.
     let live = gather_params.live_count;
     if live == 0u {
         return out;
@@ -223,4 +241,52 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         out.internal += b * tr * jv * (light.weight * p * span / dd / q * inv_samples);
     }
     return out;
+}
+
+// `L₁`'s integrand at the camera-ray point `y = x + t dir` (without
+// `T(x, y)`), one sample: `b(y) ∫ dn' P(n·n') ∫ dr T(y, x') J(x', n')`
+// over the window, with `x' = y − r n'`, `n'` drawn from the phase
+// function and `r` uniformly within the clock's remaining budget, so that
+// `d³x' = r² dr dn'` cancels the `1/r²` (`field_l1_at`).
+fn field_l1_at(
+    x: vec3<f32>,
+    dir: vec3<f32>,
+    n: vec3<f32>,
+    t: f32,
+    len: f32,
+    y: vec3<f32>,
+    rho_y: f32,
+    rng: ptr<function, Rng>,
+) -> vec3<f32> {
+    let clock = gather_params.clock;
+    let budget = gather_params.s_star - clock_to(clock, x, dir, t, len);
+    if budget <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let u1 = rng_next_f32(rng);
+    let u2 = rng_next_f32(rng);
+    let travel = sample_hg(gather_params.g, n, u1, u2);
+    let back = -travel;
+    let bc = medium_clip(y, back);
+    if !bc.hit {
+        return vec3<f32>(0.0);
+    }
+    let exit = bc.t1;
+    let m = march_clock(clock, y, back, 0.0, exit, exit, budget);
+    let r_max = select(exit, m.value, m.reached);
+    if r_max <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let r = rng_next_f32(rng) * r_max;
+    let xp = y + back * r;
+    let rho = density(xp);
+    var jv = reconstruct_multi(xp, travel, rho);
+    if rho > 0.0 {
+        jv += gather_params.scatter * rho * single_scatter_source(xp, travel, rng);
+    }
+    if all(jv == vec3<f32>(0.0)) {
+        return vec3<f32>(0.0);
+    }
+    let tr = transmittance(y, back, r, rng);
+    return gather_params.scatter * rho_y * tr * jv * r_max;
 }

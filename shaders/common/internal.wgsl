@@ -1,8 +1,9 @@
 // Evaluating the cached internal lights (METHOD.md §5, §6). Mirrors the
 // read side of `InternalLights` in src/physics/internal.rs: `S₁` from the
 // stored arriving light, the multiply scattered part from its SH
-// coefficients (clamped at zero), and the kernel reconstruction of `Ĵ`
-// along a ray.
+// coefficients (clamped at zero for one light), and the kernel
+// reconstruction of `Ĵ` at a point, which sums the lights' series
+// unclamped and clamps their normalised average at zero.
 
 // One internal light (`InternalLight`, plus its reconstruction scale).
 struct InternalLight {
@@ -33,16 +34,22 @@ fn eval_s1(i: u32, n: vec3<f32>) -> vec3<f32> {
     return sum * gather_params.scatter * light.density;
 }
 
-// The multiply scattered part of `J_i` for the basis values `y`, clamped at
-// zero (`eval_multi_with`).
-fn eval_multi_with(i: u32, y: ptr<function, array<f32, 25>>) -> vec3<f32> {
+// Light `i`'s SH series of the multiply scattered part of `J_i` for the
+// basis values `y`, unclamped (`eval_sh` of the light's coefficients).
+fn eval_sh(i: u32, y: ptr<function, array<f32, 25>>) -> vec3<f32> {
     let count = gather_params.sh_count;
     let base = gather_params.multi_offset + i * count;
     var sum = vec3<f32>(0.0);
     for (var k = 0u; k < count; k++) {
         sum += internal_vec4[base + k].xyz * (*y)[k];
     }
-    return max(sum, vec3<f32>(0.0));
+    return sum;
+}
+
+// The multiply scattered part of `J_i` for the basis values `y`, clamped at
+// zero (`eval_multi_with`).
+fn eval_multi_with(i: u32, y: ptr<function, array<f32, 25>>) -> vec3<f32> {
+    return max(eval_sh(i, y), vec3<f32>(0.0));
 }
 
 // `J_i(n)`: `S₁` plus the multiply scattered part (`eval_j`).
@@ -62,7 +69,10 @@ fn reconstruction_scale(density_at_p: f32) -> f32 {
 
 // The kernel reconstruction of the multiply scattered `Ĵ(p, n)` from the
 // lights within `h` of `p`, kernel `(1 − r²/h²)²` (`reconstruct_multi`
-// with `for_each_kernel_weight` and `LightGrid::for_each_near`).
+// with `for_each_kernel_weight` and `LightGrid::for_each_near`). The
+// lights' series are summed unclamped and the average is clamped at zero,
+// as on the CPU: clamping each noisy series would bias `Ĵ` upwards where
+// it is small.
 fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32) -> vec3<f32> {
     let scale_p = reconstruction_scale(density_at_p);
     if scale_p <= 0.0 {
@@ -88,14 +98,14 @@ fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32) -> vec3<f32>
                 let q = dot(d, d) * inv_h2;
                 if q < 1.0 {
                     let w = (1.0 - q) * (1.0 - q);
-                    num += eval_multi_with(i, &y) * (w * light.recon_scale);
+                    num += eval_sh(i, &y) * (w * light.recon_scale);
                     den += w;
                 }
             }
         }
     }
     if den > 0.0 {
-        return num * (scale_p / den);
+        return max(num * (scale_p / den), vec3<f32>(0.0));
     }
     return vec3<f32>(0.0);
 }

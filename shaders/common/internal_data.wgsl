@@ -42,12 +42,16 @@ struct GatherParams {
     cluster_power_offset: u32,
     light_power_offset: u32,
     live_offset: u32,
-    _pad0: u32,
+    l1_form: u32,
 }
 
 // Clock tags (keep in sync with `CLOCK_*` in src/gpu/mirrors.rs).
 const CLOCK_GEOMETRIC: u32 = 0u;
 const CLOCK_OPTICAL_DEPTH: u32 = 1u;
+
+// Forms of the gather's L₁ (keep in sync with `L1_*` in src/gpu/mirrors.rs).
+const L1_FIELD: u32 = 0u;
+const L1_POINTS: u32 = 1u;
 
 @group(0) @binding(6) var<uniform> gather_params: GatherParams;
 @group(0) @binding(7) var<storage, read> internal_vec4: array<vec4<f32>>;

@@ -44,9 +44,6 @@ pub enum GpuError {
         /// wgpu's message.
         message: String,
     },
-    /// The GPU backend does not implement this estimator yet.
-    #[error("the GPU backend does not implement {0} yet; use the CPU backend")]
-    Unsupported(&'static str),
     /// Reading results back from the GPU failed.
     #[error("reading back {what} failed: {message}")]
     Readback {

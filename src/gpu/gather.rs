@@ -1,11 +1,13 @@
 //! The final gather of the internal-lights method (METHOD.md §6) on the
-//! GPU, with the internal lights built on the CPU
-//! ([`InternalLights::build`]: placement and time-gated walks stay there)
-//! and uploaded once: positions and weights, the SH coefficients of the
-//! multiply scattered part of `J`, the light arriving at each light from
-//! the external ones, and both spatial indices of
+//! GPU, both forms of `L₁` (the field form and the point lights,
+//! [`L1Form`], chosen in the uniform), with the internal lights built on
+//! the CPU ([`InternalLights::build`]: placement and time-gated walks stay
+//! there) and uploaded once: positions and weights, the SH coefficients of
+//! the multiply scattered part of `J`, the light arriving at each light
+//! from the external ones, and both spatial indices of
 //! `physics::light_index` (the fine grid of the kernel reconstruction and
-//! the cluster grid of the light selection).
+//! the cluster grid of the light selection, which only the points form
+//! reads).
 //!
 //! To stay within the eight storage buffers per shader stage that every
 //! device offers, the tables are packed into two buffers, `vec4` data and
@@ -13,7 +15,7 @@
 //! written out in `shaders/common/internal_data.wgsl`.
 
 use super::context::{GpuContext, GpuError};
-use super::mirrors::{GpuGatherParams, CLOCK_GEOMETRIC, CLOCK_OPTICAL_DEPTH};
+use super::mirrors::{GpuGatherParams, CLOCK_GEOMETRIC, CLOCK_OPTICAL_DEPTH, L1_FIELD, L1_POINTS};
 use super::renderer::{storage_buffer, GpuRenderer};
 use super::shaders::GATHER_MODULE;
 use crate::physics::gated_walk::Clock;
@@ -101,7 +103,10 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
         cluster_power_offset,
         light_power_offset,
         live_offset,
-        _pad0: 0,
+        l1_form: match cache.params.l1 {
+            L1Form::Field => L1_FIELD,
+            L1Form::Points => L1_POINTS,
+        },
     };
     PackedLights {
         params,
@@ -123,11 +128,6 @@ impl GpuRenderer {
         seed: u64,
     ) -> Result<Self, GpuError> {
         use wgpu::util::DeviceExt;
-        if cache.params.l1 != L1Form::Points {
-            return Err(GpuError::Unsupported(
-                "the field form of L1 (run with --l1 points)",
-            ));
-        }
         let packed = pack_lights(cache, light_samples);
         let params = ctx
             .device

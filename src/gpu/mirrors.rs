@@ -159,6 +159,13 @@ pub const CLOCK_GEOMETRIC: u32 = 0;
 /// The optical-depth clock.
 pub const CLOCK_OPTICAL_DEPTH: u32 = 1;
 
+/// Forms of the gather's `L₁` (keep in sync with `L1_*` in
+/// `shaders/common/internal_data.wgsl`): one scattering of the
+/// reconstructed field (`L1Form::Field`).
+pub const L1_FIELD: u32 = 0;
+/// The sum over the point lights (`L1Form::Points`).
+pub const L1_POINTS: u32 = 1;
+
 /// Constants of the cached internal lights and the offsets of their tables
 /// in the two packed buffers (see `gpu::gather`). Keep in sync with
 /// `GatherParams` in `shaders/common/internal_data.wgsl`.
@@ -223,8 +230,9 @@ pub struct GpuGatherParams {
     pub light_power_offset: u32,
     /// Live clusters.
     pub live_offset: u32,
-    /// Padding.
-    pub _pad0: u32,
+    /// One of `L1_*`: the form of `L₁` (it takes the place of the padding
+    /// that closed the struct, so the size stays 176 bytes).
+    pub l1_form: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 176);
 
