@@ -691,20 +691,10 @@ fn bench_command(
             .file_name()
             .map(|n| n.to_string_lossy())
             .unwrap_or_default();
-        let samples = w as f64 * h as f64 * spp as f64;
         if let Some(ctx) = &gpu {
             let (build, median) = bench_gpu(ctx, &prepared, spp, repeats)
                 .with_context(|| format!("{}", path.display()))?;
-            println!(
-                "{:<28} {:>10} {:>6} {:>12.3} {:>10.2} {:>14.3} {:>14.3}",
-                name,
-                format!("{w}×{h}"),
-                spp,
-                median,
-                spp as f64 / median,
-                samples / median / 1e6,
-                build
-            );
+            print_bench_row(&name, w, h, spp, median, build);
             continue;
         }
         let never = AtomicBool::new(false);
@@ -727,16 +717,23 @@ fn bench_command(
         builds.sort_by(f64::total_cmp);
         let median = times[times.len() / 2];
         let build = builds[builds.len() / 2];
-        println!(
-            "{:<28} {:>10} {:>6} {:>12.3} {:>10.2} {:>14.3} {:>14.3}",
-            name,
-            format!("{w}×{h}"),
-            spp,
-            median,
-            spp as f64 / median,
-            samples / median / 1e6,
-            build
-        );
+        print_bench_row(&name, w, h, spp, median, build);
     }
     Ok(())
+}
+
+/// One row of `lantern bench`'s table: median pass time per `spp`
+/// passes, passes and samples per second, and the re-sampling time.
+fn print_bench_row(name: &str, w: u32, h: u32, spp: u32, median: f64, build: f64) {
+    let samples = w as f64 * h as f64 * spp as f64;
+    println!(
+        "{:<28} {:>10} {:>6} {:>12.3} {:>10.2} {:>14.3} {:>14.3}",
+        name,
+        format!("{w}×{h}"),
+        spp,
+        median,
+        spp as f64 / median,
+        samples / median / 1e6,
+        build
+    );
 }

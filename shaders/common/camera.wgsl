@@ -9,3 +9,31 @@ fn camera_ray_dir(px: f32, py: f32) -> vec3<f32> {
     let sy = 1.0 - 2.0 * py / f32(c.height);
     return normalize(c.forward + c.right_scaled * sx + c.up_scaled * sy);
 }
+
+// Workgroup side in pixels of the per-pixel entry points; keep in sync
+// with `WORKGROUP_SIDE` in src/gpu/renderer.rs.
+const WORKGROUP_SIDE: u32 = 8u;
+
+// The start of one pixel's sample in a pass (mirrors `Renderer::pass` in
+// src/cpu/mod.rs): its index (rows top to bottom), its random stream for
+// (seed, pixel, pass), and the camera ray through a jittered point of it.
+struct PixelSample {
+    index: u32,
+    dir: vec3<f32>,
+    rng: Rng,
+}
+
+fn pixel_sample(id: vec3<u32>) -> PixelSample {
+    let index = id.y * scene.camera.width + id.x;
+    var rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, index, pass_params.pass_index);
+    let jx = rng_next_f32(&rng);
+    let jy = rng_next_f32(&rng);
+    let dir = camera_ray_dir(f32(id.x) + jx, f32(id.y) + jy);
+    return PixelSample(index, dir, rng);
+}
+
+// Whether the invocation `id` lies on the image (the dispatch rounds up
+// to whole workgroups).
+fn pixel_on_image(id: vec3<u32>) -> bool {
+    return id.x < scene.camera.width && id.y < scene.camera.height;
+}

@@ -20,7 +20,7 @@ use super::shaders::{ModuleSource, REFERENCE_MODULE};
 use crate::render::{Film, Prepared};
 
 /// Workgroup side in pixels; keep in sync with `WORKGROUP_SIDE` in
-/// `shaders/reference/main.wgsl`.
+/// `shaders/common/camera.wgsl`.
 pub const WORKGROUP_SIDE: u32 = 8;
 
 /// A compute pipeline built from one assembled module, with its bind-group
