@@ -79,8 +79,11 @@ const LIGHT_POINT: u32 = 1u;
 
 @group(0) @binding(0) var<uniform> scene: Scene;
 @group(0) @binding(1) var<uniform> pass_params: PassParams;
-// Voxels of a grid density, x fastest (one unused zero otherwise).
-@group(0) @binding(2) var<storage, read> density_voxels: array<f32>;
+// Voxels of a grid density as a 3D texture (`r32float`, one unused zero
+// voxel otherwise). A texture, not a storage buffer: a 512³ grid (512 MiB)
+// is far above the storage-buffer binding limit of many devices (128 MiB
+// on lavapipe), while 3D textures reach 2048³ texels.
+@group(0) @binding(2) var density_voxels: texture_3d<f32>;
 // Majorant per coarse cell, x fastest (`MajorantGrid::values`).
 @group(0) @binding(3) var<storage, read> majorant_values: array<f32>;
 // External lights (at least one element; counts in `scene`).

@@ -5,6 +5,12 @@
 // A large finite stand-in for infinity (WGSL has no infinity literal).
 const BIG: f32 = 3.0e38;
 
+// One voxel of the grid (`VoxelGrid::data`, x fastest), read without filtering: the
+// trilinear weights are computed below exactly as on the CPU.
+fn voxel(x: u32, y: u32, z: u32) -> f32 {
+    return textureLoad(density_voxels, vec3<u32>(x, y, z), 0).x;
+}
+
 // Clamped, cell-centred trilinear lookup of the voxel grid at world point
 // `p` (`VoxelGrid::sample`): voxel centres sit at integer coordinates.
 fn grid_sample(p: vec3<f32>) -> f32 {
@@ -19,16 +25,10 @@ fn grid_sample(p: vec3<f32>) -> f32 {
     let i0 = min(vec3<u32>(floor(u)), top);
     let i1 = min(i0 + vec3<u32>(1u), top);
     let f = u - vec3<f32>(i0);
-    let sx = dims.x;
-    let sxy = dims.x * dims.y;
-    let r00 = i0.y * sx + i0.z * sxy;
-    let r10 = i1.y * sx + i0.z * sxy;
-    let r01 = i0.y * sx + i1.z * sxy;
-    let r11 = i1.y * sx + i1.z * sxy;
-    let c00 = density_voxels[r00 + i0.x] * (1.0 - f.x) + density_voxels[r00 + i1.x] * f.x;
-    let c10 = density_voxels[r10 + i0.x] * (1.0 - f.x) + density_voxels[r10 + i1.x] * f.x;
-    let c01 = density_voxels[r01 + i0.x] * (1.0 - f.x) + density_voxels[r01 + i1.x] * f.x;
-    let c11 = density_voxels[r11 + i0.x] * (1.0 - f.x) + density_voxels[r11 + i1.x] * f.x;
+    let c00 = voxel(i0.x, i0.y, i0.z) * (1.0 - f.x) + voxel(i1.x, i0.y, i0.z) * f.x;
+    let c10 = voxel(i0.x, i1.y, i0.z) * (1.0 - f.x) + voxel(i1.x, i1.y, i0.z) * f.x;
+    let c01 = voxel(i0.x, i0.y, i1.z) * (1.0 - f.x) + voxel(i1.x, i0.y, i1.z) * f.x;
+    let c11 = voxel(i0.x, i1.y, i1.z) * (1.0 - f.x) + voxel(i1.x, i1.y, i1.z) * f.x;
     let c0 = c00 * (1.0 - f.y) + c10 * f.y;
     let c1 = c01 * (1.0 - f.y) + c11 * f.y;
     return c0 * (1.0 - f.z) + c1 * f.z;

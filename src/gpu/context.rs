@@ -35,6 +35,16 @@ pub enum GpuError {
         /// The limit's value on this device.
         max: u64,
     },
+    /// A 3D texture is larger along an axis than the device allows.
+    #[error("the {what} is {dims} voxels, more than this device's max_texture_dimension_3d ({max} per axis); resample the volume or use the CPU backend")]
+    TooManyVoxels {
+        /// Which data (e.g. "density grid").
+        what: String,
+        /// Its size, "nx × ny × nz".
+        dims: String,
+        /// The limit's value on this device.
+        max: u32,
+    },
     /// wgpu reported an error (a shader that does not compile, a bad
     /// binding, out of memory).
     #[error("GPU error in {context}: {message}")]

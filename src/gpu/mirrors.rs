@@ -22,7 +22,7 @@ use crate::scene::{CameraFrame, Density};
 pub const DENSITY_SPHERE: u32 = 0;
 /// A box of density one.
 pub const DENSITY_BOX: u32 = 1;
-/// A voxel grid in the density buffer.
+/// A voxel grid in the density texture.
 pub const DENSITY_GRID: u32 = 2;
 /// Light tags (keep in sync with `LIGHT_*` in `shaders/common/scene.wgsl`).
 pub const LIGHT_SUN: u32 = 0;
@@ -269,7 +269,7 @@ impl GpuCamera {
 
 impl GpuMedium {
     /// The GPU form of a volume; its voxels (for a grid) go in a separate
-    /// buffer (see [`density_voxels`]).
+    /// 3D texture (see [`density_voxels`]).
     pub fn new(volume: &SceneVolume) -> Self {
         let MajorantGrid { res, min, max, .. } = volume.majorants;
         let mut m = Self {
@@ -306,12 +306,13 @@ impl GpuMedium {
     }
 }
 
-/// The voxels the density buffer holds: the grid's, x fastest, or one
-/// unused zero for analytic shapes (a binding cannot be empty).
-pub fn density_voxels(density: &Density) -> &[f32] {
+/// The voxels the density texture holds and its size: the grid's, x
+/// fastest, or one unused zero voxel for analytic shapes (a binding cannot
+/// be empty).
+pub fn density_voxels(density: &Density) -> (&[f32], [u32; 3]) {
     match density {
-        Density::Grid(g) => &g.data,
-        _ => &[0.0],
+        Density::Grid(g) => (&g.data, g.dims.to_array()),
+        _ => (&[0.0], [1, 1, 1]),
     }
 }
 

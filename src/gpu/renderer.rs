@@ -73,8 +73,9 @@ pub(crate) struct SceneBuffers {
     pub scene: wgpu::Buffer,
     /// `PassParams` uniform, rewritten before every pass.
     pub pass: wgpu::Buffer,
-    /// Density voxels.
-    pub density: wgpu::Buffer,
+    /// Density voxels: the view of a 3D `r32float` texture (which it keeps
+    /// alive), bound at binding 2.
+    pub density_view: wgpu::TextureView,
     /// Majorant per coarse cell.
     pub majorants: wgpu::Buffer,
     /// External lights.
@@ -88,14 +89,11 @@ impl SceneBuffers {
     pub fn new(ctx: &GpuContext, prepared: &Prepared) -> Result<Self, GpuError> {
         let vol = &prepared.volume;
         let scene_data = GpuScene::new(&prepared.camera, vol, &prepared.lights);
-        let voxels = density_voxels(&vol.density);
+        let (voxels, dims) = density_voxels(&vol.density);
         let lights = gpu_lights(&prepared.lights);
-        let density = storage_buffer(
-            ctx,
-            "density grid",
-            bytemuck::cast_slice(voxels),
-            wgpu::BufferUsages::empty(),
-        )?;
+        let density = density_texture(ctx, voxels, dims)?;
+        let density_view = density.create_view(&wgpu::TextureViewDescriptor::default());
+        let density_bytes = voxels.len() as u64 * 4;
         let majorants = storage_buffer(
             ctx,
             "majorant grid",
@@ -123,11 +121,11 @@ impl SceneBuffers {
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             });
         let bytes =
-            density.size() + majorants.size() + lights_buf.size() + scene.size() + pass.size();
+            density_bytes + majorants.size() + lights_buf.size() + scene.size() + pass.size();
         Ok(Self {
             scene,
             pass,
-            density,
+            density_view,
             majorants,
             lights: lights_buf,
             bytes,
@@ -137,17 +135,86 @@ impl SceneBuffers {
     /// Bind-group entries 0–4.
     pub fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 5] {
         [
-            (0, &self.scene),
-            (1, &self.pass),
-            (2, &self.density),
-            (3, &self.majorants),
-            (4, &self.lights),
+            buffer(0, &self.scene),
+            buffer(1, &self.pass),
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::TextureView(&self.density_view),
+            },
+            buffer(3, &self.majorants),
+            buffer(4, &self.lights),
         ]
-        .map(|(binding, buffer)| wgpu::BindGroupEntry {
-            binding,
-            resource: buffer.as_entire_binding(),
-        })
     }
+}
+
+/// Binds all of `buffer` at `binding`.
+fn buffer(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
+}
+
+/// The density voxels (x fastest, `dims` of them) as a 3D `r32float`
+/// texture, after checking the device's 3D texture size; read with
+/// `textureLoad` in `shaders/common/volume.wgsl`.
+pub(crate) fn density_texture(
+    ctx: &GpuContext,
+    voxels: &[f32],
+    dims: [u32; 3],
+) -> Result<wgpu::Texture, GpuError> {
+    let max = ctx.limits.max_texture_dimension_3d;
+    if dims.iter().any(|&d| d > max) {
+        return Err(GpuError::TooManyVoxels {
+            what: "density grid".to_owned(),
+            dims: format!("{} × {} × {}", dims[0], dims[1], dims[2]),
+            max,
+        });
+    }
+    let size = wgpu::Extent3d {
+        width: dims[0],
+        height: dims[1],
+        depth_or_array_layers: dims[2],
+    };
+    ctx.scoped("uploading the density grid", || {
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("density grid"),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::R32Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        // One slab of z-slices at a time keeps the staging copy wgpu makes
+        // small (a 512³ grid is 512 MiB).
+        let slice = dims[0] as usize * dims[1] as usize;
+        let slab = (64 * 1024 * 1024 / (4 * slice.max(1))).max(1);
+        for (n, chunk) in voxels.chunks(slice * slab).enumerate() {
+            let z0 = (n * slab) as u32;
+            let depth = (chunk.len() / slice.max(1)) as u32;
+            ctx.queue.write_texture(
+                wgpu::TexelCopyTextureInfo {
+                    texture: &texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d { x: 0, y: 0, z: z0 },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                bytemuck::cast_slice(chunk),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(4 * dims[0]),
+                    rows_per_image: Some(dims[1]),
+                },
+                wgpu::Extent3d {
+                    depth_or_array_layers: depth,
+                    ..size
+                },
+            );
+        }
+        texture
+    })
 }
 
 /// Copies `buffer` (which must have `COPY_SRC`) to the CPU.
