@@ -270,6 +270,9 @@ pub enum Command {
     /// s* (with (N+1)s* fixed), N and M; prints a table and writes images and
     /// plots.
     Validate(crate::validate::ValidateArgs),
+    /// RMSE against time of both renderers against a converged reference,
+    /// and their equal-error time ratio; writes a CSV and a PNG plot.
+    Converge(crate::converge::ConvergeArgs),
 }
 
 /// Runs the command line; the binary's `main` calls this.
@@ -324,6 +327,7 @@ pub fn run(cli: Cli) -> Result<()> {
             )
         }
         Some(Command::Validate(args)) => crate::validate::run(&args),
+        Some(Command::Converge(args)) => crate::converge::run(&args),
     }
 }
 

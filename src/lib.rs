@@ -25,6 +25,7 @@
 //! Renderers know nothing of any user interface.
 
 pub mod cli;
+pub mod converge;
 pub mod cpu;
 pub mod gpu;
 pub mod physics;

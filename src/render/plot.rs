@@ -118,6 +118,20 @@ impl Plot {
         let mut xs: Vec<f32> = pts().map(|p| p.0).collect();
         xs.sort_by(f32::total_cmp);
         xs.dedup();
+        if xs.len() > 12 {
+            // Too many points to label each (curves against time): five
+            // evenly spaced ticks instead, as on the y axis.
+            xs = (0..=4)
+                .map(|k| {
+                    let v = x0 + pad + (x1 - x0 - 2.0 * pad) * k as f32 / 4.0;
+                    if self.log_x {
+                        10f32.powf(v)
+                    } else {
+                        v
+                    }
+                })
+                .collect();
+        }
         for &x in &xs {
             let tx = px(x);
             line(&mut img, tx, TOP + ph, tx, TOP + ph + 4, white);

@@ -1,0 +1,471 @@
+//! `lantern converge`: RMSE against time for both renderers, measured in
+//! one run (issue 3's equal-error time ratio).
+//!
+//! A converged reference image is rendered first (or read from an EXR
+//! written by an earlier run). Then the reference path tracer (METHOD.md
+//! §2) and the internal-lights renderer (§3–§6; its clock starts before
+//! placement and walks, so re-sampling is paid for) render progressively
+//! with other seeds; at checkpoints spaced by a factor `√2` in samples the
+//! clock is paused and the image's RMSE against the converged one, relative
+//! to its mean, is recorded. The converged image's own noise is removed
+//! from each RMSE: `RMSE² − mean(Var[converged pixel])`, the part of the
+//! squared error that its per-pixel variance of the mean explains (it would
+//! otherwise put a floor under both curves).
+//!
+//! Output: a table (time, spp, RMSE per checkpoint), `curves.csv`,
+//! `rmse_vs_time.png` (log-log), and for the target RMSE the first time
+//! each renderer reached it and their ratio, or the lowest RMSE reached if
+//! it never did.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use glam::Vec3;
+
+use crate::cli::{load_prepared, InternalArgs};
+use crate::cpu::Renderer;
+use crate::render::export::{read_exr, write_exr};
+use crate::render::plot::{Plot, Series};
+use crate::render::{Film, Prepared};
+use crate::scene::{Method, RenderSettings};
+use crate::validate::output_dir;
+
+/// Options of `lantern converge`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct ConvergeArgs {
+    /// The scene file (.ron).
+    pub scene: PathBuf,
+    /// Image side in pixels (overrides the scene's camera; 0 keeps it).
+    #[arg(long, default_value_t = 256)]
+    pub size: u32,
+    /// Samples per pixel of the converged reference.
+    #[arg(long, default_value_t = 2048)]
+    pub reference_spp: u32,
+    /// Read the converged reference from this EXR (written by an earlier
+    /// run as `converged.exr`, with its variance in `converged_var.exr`)
+    /// instead of rendering it.
+    #[arg(long)]
+    pub converged: Option<PathBuf>,
+    /// Seconds each renderer may run.
+    #[arg(long, default_value_t = 60.0)]
+    pub budget: f64,
+    /// The RMSE (relative to the image mean) whose time is compared.
+    #[arg(long, default_value_t = 0.05)]
+    pub target: f32,
+    /// Output folder.
+    #[arg(long, default_value = "target/converge")]
+    pub out: PathBuf,
+    /// Internal-lights parameters (default: the scene's).
+    #[command(flatten)]
+    pub internal: InternalArgs,
+}
+
+/// One checkpoint of a curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Checkpoint {
+    /// Seconds since the renderer started (re-sampling included).
+    pub secs: f64,
+    /// Samples per pixel so far.
+    pub spp: u32,
+    /// RMSE relative to the converged image's mean, its noise removed.
+    pub rmse: f32,
+}
+
+/// RMSE of `image` against `converged` relative to the converged mean,
+/// with the converged image's own noise (`converged_var`, the variance of
+/// its per-pixel mean) removed from the mean squared error (clamped at 0).
+pub fn rmse_against(image: &[Vec3], converged: &[Vec3], converged_var: &[Vec3]) -> f32 {
+    let n = image.len().max(1) as f64 * 3.0;
+    let mut se = 0.0f64;
+    let mut var = 0.0f64;
+    let mut sum = 0.0f64;
+    for ((a, b), v) in image.iter().zip(converged).zip(converged_var) {
+        for c in 0..3 {
+            se += ((a[c] - b[c]) as f64).powi(2);
+            var += v[c] as f64;
+            sum += b[c] as f64;
+        }
+    }
+    let mean = (sum / n).max(1e-30);
+    (((se - var) / n).max(0.0).sqrt() / mean) as f32
+}
+
+/// The first time a curve is at or below `target`, linearly interpolated
+/// in log RMSE between the checkpoints around the crossing.
+pub fn time_to(curve: &[Checkpoint], target: f32) -> Option<f64> {
+    let i = curve.iter().position(|c| c.rmse <= target)?;
+    if i == 0 {
+        return Some(curve[0].secs);
+    }
+    let (a, b) = (curve[i - 1], curve[i]);
+    let la = (a.rmse.max(1e-12) as f64).ln();
+    let lb = (b.rmse.max(1e-12) as f64).ln();
+    let lt = (target as f64).ln();
+    let f = if la > lb { (la - lt) / (la - lb) } else { 1.0 };
+    Some(a.secs + f.clamp(0.0, 1.0) * (b.secs - a.secs))
+}
+
+/// Renders progressively with `settings` for at most `budget` (and at most
+/// `max_spp` passes), recording a checkpoint whenever the sample count
+/// reaches the next of 1, 2, 3, 4, 6, 8, 11, 16, … (factor ≈ √2).
+fn curve(
+    prepared: &Arc<Prepared>,
+    settings: &RenderSettings,
+    budget: Duration,
+    max_spp: u32,
+    converged: &[Vec3],
+    converged_var: &[Vec3],
+    label: &str,
+) -> Result<Vec<Checkpoint>> {
+    let never = AtomicBool::new(false);
+    let mut elapsed = Duration::ZERO;
+    let start = Instant::now();
+    let renderer =
+        Renderer::new(prepared.clone(), settings, &never).context("render was cancelled")?;
+    elapsed += start.elapsed();
+    let cam = prepared.camera;
+    let mut film = Film::new(cam.width, cam.height);
+    let mut out = Vec::new();
+    let mut next = 1.0f64;
+    for pass in 0..max_spp {
+        let start = Instant::now();
+        let img = renderer
+            .pass(pass, &never)
+            .context("render was cancelled")?;
+        film.add_pass(&img.total);
+        elapsed += start.elapsed();
+        let spp = pass + 1;
+        let last = elapsed >= budget || spp == max_spp;
+        if spp as f64 >= next.floor() || last {
+            while next.floor() <= spp as f64 {
+                next *= std::f64::consts::SQRT_2;
+            }
+            let rmse = rmse_against(&film.mean(), converged, converged_var);
+            out.push(Checkpoint {
+                secs: elapsed.as_secs_f64(),
+                spp,
+                rmse,
+            });
+            eprintln!(
+                "{label}: {spp} spp, {:.2} s, RMSE {:.2} %",
+                elapsed.as_secs_f64(),
+                100.0 * rmse
+            );
+        }
+        if last {
+            break;
+        }
+    }
+    Ok(out)
+}
+
+/// Runs `lantern converge`.
+pub fn run(args: &ConvergeArgs) -> Result<()> {
+    if !(args.budget > 0.0 && args.budget.is_finite()) {
+        bail!("--budget must be a positive number of seconds");
+    }
+    if !(args.target > 0.0 && args.target.is_finite()) {
+        bail!("--target must be a positive relative RMSE (e.g. 0.05)");
+    }
+    let mut prepared = load_prepared(&args.scene)?;
+    if args.size > 0 {
+        let mut scene = prepared.scene.clone();
+        scene.camera.width = args.size;
+        scene.camera.height = args.size;
+        scene.validate(&args.scene)?;
+        prepared = Prepared::with_density(scene, prepared.volume.density.clone());
+    }
+    let prepared = Arc::new(prepared);
+    let (w, h) = (prepared.camera.width, prepared.camera.height);
+    let out_dir = output_dir(&args.out, &args.scene);
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let stem = out_dir
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+
+    let mut internal = prepared.scene.render.clone();
+    internal.method = Method::Internal;
+    args.internal.apply(&mut internal.internal);
+    internal.internal.validate(&args.scene)?;
+    let mut reference = internal.clone();
+    reference.method = Method::Reference;
+
+    let (converged, converged_var) = match &args.converged {
+        Some(path) => {
+            let read = |p: &std::path::Path| {
+                read_exr(p).with_context(|| format!("cannot read {}", p.display()))
+            };
+            let mean = read(path)?;
+            let var_path = path.with_file_name("converged_var.exr");
+            let var = read(&var_path)?;
+            let (cw, ch, vw, vh) = (mean.width, mean.height, var.width, var.height);
+            if (cw, ch) != (w, h) || (vw, vh) != (w, h) {
+                bail!(
+                    "{} is {cw}×{ch} and {} is {vw}×{vh}, but the render is {w}×{h} (--size)",
+                    path.display(),
+                    var_path.display()
+                );
+            }
+            (mean.pixels, var.pixels)
+        }
+        None => {
+            eprintln!("{stem}: converged reference at {} spp…", args.reference_spp);
+            let never = AtomicBool::new(false);
+            let mut settings = reference.clone();
+            settings.seed = reference.seed.wrapping_add(7_777_777);
+            let renderer = Renderer::new(prepared.clone(), &settings, &never)
+                .context("render was cancelled")?;
+            let mut film = Film::new(w, h);
+            for pass in 0..args.reference_spp {
+                let img = renderer
+                    .pass(pass, &never)
+                    .context("render was cancelled")?;
+                film.add_pass(&img.total);
+            }
+            let (mean, var) = (film.mean(), film.variance_of_mean());
+            write_exr(&out_dir.join("converged.exr"), w, h, &mean)?;
+            write_exr(&out_dir.join("converged_var.exr"), w, h, &var)?;
+            (mean, var)
+        }
+    };
+    // The converged image's own noise, relative to its mean.
+    let n = 3.0 * converged.len().max(1) as f64;
+    let mean: f64 = converged
+        .iter()
+        .map(|v| (v.x + v.y + v.z) as f64)
+        .sum::<f64>()
+        / n;
+    let var: f64 = converged_var
+        .iter()
+        .map(|v| (v.x + v.y + v.z) as f64)
+        .sum::<f64>()
+        / n;
+    let noise = var.sqrt() / mean.max(1e-30);
+
+    let budget = Duration::from_secs_f64(args.budget);
+    let max_spp = 1 << 20;
+    let ref_curve = curve(
+        &prepared,
+        &reference,
+        budget,
+        max_spp,
+        &converged,
+        &converged_var,
+        "reference",
+    )?;
+    let int_curve = curve(
+        &prepared,
+        &internal,
+        budget,
+        max_spp,
+        &converged,
+        &converged_var,
+        "internal",
+    )?;
+
+    let mut csv = String::from("method,secs,spp,rmse\n");
+    for (name, c) in [("reference", &ref_curve), ("internal", &int_curve)] {
+        for p in c.iter() {
+            let _ = writeln!(csv, "{name},{:.4},{},{:.6}", p.secs, p.spp, p.rmse);
+        }
+    }
+    let csv_path = out_dir.join("curves.csv");
+    std::fs::write(&csv_path, &csv)
+        .with_context(|| format!("cannot write {}", csv_path.display()))?;
+    let mut plot = Plot::new(
+        &format!("{stem} {w}x{h}: RMSE against time"),
+        "seconds",
+        "RMSE %",
+        true,
+    )
+    .log_y(true);
+    for (name, colour, c) in [
+        ("reference", [0.9, 0.9, 0.9], &ref_curve),
+        ("internal lights", [1.0, 0.75, 0.3], &int_curve),
+    ] {
+        plot.add(Series::new(
+            name,
+            colour,
+            c.iter().map(|p| (p.secs as f32, 100.0 * p.rmse)).collect(),
+        ));
+    }
+    plot.add(Series::new(
+        "target",
+        [0.4, 0.7, 1.0],
+        vec![
+            (
+                ref_curve.first().map_or(0.01, |p| p.secs as f32),
+                100.0 * args.target,
+            ),
+            (args.budget as f32, 100.0 * args.target),
+        ],
+    ));
+    plot.save(&out_dir.join("rmse_vs_time.png"))?;
+
+    let i = &internal.internal;
+    let mut report = String::new();
+    let _ = writeln!(
+        report,
+        "\n### {stem} {w}×{h}: time to {:.1} % RMSE (converged reference {} spp, its own noise {:.2} % removed; budget {:.0} s each)\n",
+        100.0 * args.target,
+        args.reference_spp,
+        100.0 * noise,
+        args.budget
+    );
+    let _ = writeln!(
+        report,
+        "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}\n",
+        i.lights,
+        i.walks,
+        i.terms,
+        i.s_star
+            .map_or("scene default".to_owned(), |s| s.to_string()),
+        i.sh_order,
+        i.clock,
+        i.l1
+    );
+    let _ = writeln!(
+        report,
+        "| renderer | time to target | lowest RMSE (at s, spp) |"
+    );
+    let _ = writeln!(report, "|---|---|---|");
+    let mut times = Vec::new();
+    for (name, c) in [("reference", &ref_curve), ("internal lights", &int_curve)] {
+        let t = time_to(c, args.target);
+        times.push(t);
+        let best = c
+            .iter()
+            .min_by(|a, b| a.rmse.total_cmp(&b.rmse))
+            .copied()
+            .unwrap_or(Checkpoint {
+                secs: 0.0,
+                spp: 0,
+                rmse: f32::NAN,
+            });
+        let _ = writeln!(
+            report,
+            "| {name} | {} | {:.2} % ({:.2} s, {} spp) |",
+            t.map_or("not reached".to_owned(), |t| format!("{t:.2} s")),
+            100.0 * best.rmse,
+            best.secs,
+            best.spp
+        );
+    }
+    let _ = match (times[0], times[1]) {
+        (Some(r), Some(i)) => writeln!(
+            report,
+            "\nequal-error time ratio (reference / internal): {:.2}",
+            r / i
+        ),
+        (Some(_), None) => writeln!(
+            report,
+            "\nthe internal-lights renderer did not reach the target within the budget"
+        ),
+        (None, _) => writeln!(
+            report,
+            "\nthe reference did not reach the target within the budget; raise --budget"
+        ),
+    };
+    print!("{report}");
+    std::fs::write(out_dir.join("report.md"), &report)
+        .with_context(|| format!("cannot write {}", out_dir.join("report.md").display()))?;
+    eprintln!("{stem}: wrote {}", out_dir.display());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn converged_noise_is_removed_from_the_rmse() {
+        let converged = vec![Vec3::splat(1.0); 4];
+        // Errors of ±0.1 everywhere: RMSE 0.1; a converged variance of
+        // 0.0064 explains 0.08² of it, leaving 0.06.
+        let image: Vec<Vec3> = (0..4)
+            .map(|i| Vec3::splat(if i % 2 == 0 { 1.1 } else { 0.9 }))
+            .collect();
+        let none = vec![Vec3::ZERO; 4];
+        assert!((rmse_against(&image, &converged, &none) - 0.1).abs() < 1e-6);
+        let var = vec![Vec3::splat(0.0064); 4];
+        assert!((rmse_against(&image, &converged, &var) - 0.06).abs() < 1e-5);
+        // Never negative.
+        assert_eq!(rmse_against(&converged, &converged, &var), 0.0);
+    }
+
+    /// End to end at 16² with a short budget: both curves are written, and
+    /// the reference's RMSE falls as its samples grow (by at least half
+    /// from its first checkpoint to its last, which at hundreds of passes
+    /// is a drop of several times).
+    #[test]
+    fn curves_are_written_and_the_reference_converges() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let args = ConvergeArgs {
+            scene: root.join("assets/scenes/thin_sphere.ron"),
+            size: 16,
+            reference_spp: 512,
+            converged: None,
+            budget: 0.5,
+            target: 0.05,
+            out: dir.path().to_owned(),
+            internal: InternalArgs {
+                lights: Some(256),
+                walks: Some(8),
+                ..Default::default()
+            },
+        };
+        run(&args).unwrap();
+        let out = dir.path().join("thin_sphere");
+        let csv = std::fs::read_to_string(out.join("curves.csv")).unwrap();
+        let rows = |name: &str| -> Vec<(u32, f32)> {
+            csv.lines()
+                .filter(|l| l.starts_with(&format!("{name},")))
+                .map(|l| {
+                    let f: Vec<&str> = l.split(',').collect();
+                    (f[2].parse().unwrap(), f[3].parse().unwrap())
+                })
+                .collect()
+        };
+        let reference = rows("reference");
+        let internal = rows("internal");
+        assert!(reference.len() >= 5 && !internal.is_empty(), "{csv}");
+        let (first, last) = (reference[0], reference[reference.len() - 1]);
+        assert!(last.0 > 64, "{csv}");
+        assert!(last.1 < 0.5 * first.1, "{csv}");
+        for f in [
+            "report.md",
+            "rmse_vs_time.png",
+            "converged.exr",
+            "converged_var.exr",
+        ] {
+            assert!(out.join(f).is_file(), "{f} missing");
+        }
+    }
+
+    #[test]
+    fn time_to_interpolates_in_log_rmse() {
+        let c = [
+            Checkpoint {
+                secs: 1.0,
+                spp: 1,
+                rmse: 0.2,
+            },
+            Checkpoint {
+                secs: 2.0,
+                spp: 2,
+                rmse: 0.05,
+            },
+        ];
+        // ln 0.1 is halfway between ln 0.2 and ln 0.05.
+        assert!((time_to(&c, 0.1).unwrap() - 1.5).abs() < 1e-9);
+        assert_eq!(time_to(&c, 0.3), Some(1.0));
+        assert_eq!(time_to(&c, 0.01), None);
+    }
+}
