@@ -40,14 +40,28 @@ impl VoxelGrid {
     pub fn sample(&self, p: Vec3) -> f32 {
         let max = (self.dims - UVec3::ONE).as_vec3();
         let u = self.voxel_coord(p).clamp(Vec3::ZERO, max);
-        let i0 = u.floor().as_uvec3().min(self.dims - UVec3::ONE);
-        let i1 = (i0 + UVec3::ONE).min(self.dims - UVec3::ONE);
+        // `u ≥ 0`, so truncation is the floor (and, unlike `floor`, is one
+        // instruction on baseline x86-64 instead of a libm call: 10 % of
+        // the gather's time went there).
+        let i0 = u.as_uvec3().min(self.dims - UVec3::ONE);
         let f = u - i0.as_vec3();
-        let v = |i: u32, j: u32, k: u32| self.data[self.index(i, j, k)];
-        let c00 = v(i0.x, i0.y, i0.z) * (1.0 - f.x) + v(i1.x, i0.y, i0.z) * f.x;
-        let c10 = v(i0.x, i1.y, i0.z) * (1.0 - f.x) + v(i1.x, i1.y, i0.z) * f.x;
-        let c01 = v(i0.x, i0.y, i1.z) * (1.0 - f.x) + v(i1.x, i0.y, i1.z) * f.x;
-        let c11 = v(i0.x, i1.y, i1.z) * (1.0 - f.x) + v(i1.x, i1.y, i1.z) * f.x;
+        // One base index and the three neighbour offsets (zero on the last
+        // voxel of an axis, where the lookup clamps): the same eight voxels
+        // and weights as indexing each corner, with less arithmetic.
+        let (nx, nxy) = (
+            self.dims.x as usize,
+            self.dims.x as usize * self.dims.y as usize,
+        );
+        let base = self.index(i0.x, i0.y, i0.z);
+        let dx = (i0.x + 1 < self.dims.x) as usize;
+        let dy = (i0.y + 1 < self.dims.y) as usize * nx;
+        let dz = (i0.z + 1 < self.dims.z) as usize * nxy;
+        let d = &self.data;
+        let v = |o: usize| d[base + o];
+        let c00 = v(0) * (1.0 - f.x) + v(dx) * f.x;
+        let c10 = v(dy) * (1.0 - f.x) + v(dy + dx) * f.x;
+        let c01 = v(dz) * (1.0 - f.x) + v(dz + dx) * f.x;
+        let c11 = v(dz + dy) * (1.0 - f.x) + v(dz + dy + dx) * f.x;
         let c0 = c00 * (1.0 - f.y) + c10 * f.y;
         let c1 = c01 * (1.0 - f.y) + c11 * f.y;
         c0 * (1.0 - f.z) + c1 * f.z
