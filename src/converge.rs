@@ -26,13 +26,13 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
 
-use crate::cli::{load_prepared, InternalArgs};
+use crate::cli::InternalArgs;
 use crate::cpu::Renderer;
 use crate::render::export::{read_exr, write_exr};
 use crate::render::plot::{Plot, Series};
 use crate::render::{Film, Prepared};
 use crate::scene::{Method, RenderSettings};
-use crate::validate::output_dir;
+use crate::validate::{load_square, output_dir};
 
 /// Options of `lantern converge`.
 #[derive(Clone, Debug, clap::Args)]
@@ -171,15 +171,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
     if !(args.target > 0.0 && args.target.is_finite()) {
         bail!("--target must be a positive relative RMSE (e.g. 0.05)");
     }
-    let mut prepared = load_prepared(&args.scene)?;
-    if args.size > 0 {
-        let mut scene = prepared.scene.clone();
-        scene.camera.width = args.size;
-        scene.camera.height = args.size;
-        scene.validate(&args.scene)?;
-        prepared = Prepared::with_density(scene, prepared.volume.density.clone());
-    }
-    let prepared = Arc::new(prepared);
+    let prepared = Arc::new(load_square(&args.scene, args.size)?);
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let out_dir = output_dir(&args.out, &args.scene);
     std::fs::create_dir_all(&out_dir)

@@ -127,20 +127,29 @@ pub fn render_timed(
     Ok((film.mean(), build, start.elapsed().as_secs_f64()))
 }
 
+/// Loads and prepares `scene` with its image resized to `size`² pixels
+/// (0 keeps the scene's camera size).
+pub fn load_square(scene: &Path, size: u32) -> Result<Prepared> {
+    let prepared = load_prepared(scene)?;
+    if size == 0 {
+        return Ok(prepared);
+    }
+    let mut resized = prepared.scene.clone();
+    resized.camera.width = size;
+    resized.camera.height = size;
+    resized.validate(scene)?;
+    Ok(Prepared::with_density(
+        resized,
+        prepared.volume.density.clone(),
+    ))
+}
+
 /// Runs `lantern validate`.
 pub fn run(args: &ValidateArgs) -> Result<()> {
     if args.spp == 0 || args.reference_spp == 0 {
         bail!("--spp and --reference-spp must be at least 1");
     }
-    let mut prepared = load_prepared(&args.scene)?;
-    if args.size > 0 {
-        let mut scene = prepared.scene.clone();
-        scene.camera.width = args.size;
-        scene.camera.height = args.size;
-        scene.validate(&args.scene)?;
-        prepared = Prepared::with_density(scene, prepared.volume.density.clone());
-    }
-    let prepared = Arc::new(prepared);
+    let prepared = Arc::new(load_square(&args.scene, args.size)?);
     let out_dir = output_dir(&args.out, &args.scene);
     let stem = out_dir
         .file_name()

@@ -11,16 +11,13 @@
 
 mod common;
 
-use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{UVec3, Vec3};
-use lantern::cpu::Renderer;
 use lantern::gpu::{GpuContext, GpuImage, GpuRenderer};
-use lantern::physics::internal::InternalLights;
 use lantern::render::film::image_mean;
-use lantern::render::{internal_params, Film, Prepared};
+use lantern::render::{Film, Prepared};
 use lantern::scene::volume::{load_grid, write_mitsuba_vol};
 use lantern::scene::{Density, GridFormat, Method, VoxelGrid};
 use rayon::prelude::*;
@@ -136,7 +133,6 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
     settings.seed = 1;
     settings.internal.lights = 2048;
     settings.internal.walks = 32;
-    let never = AtomicBool::new(false);
 
     // Reference on the CPU: eight times the GPU's samples (cheap here), so
     // the comparison's noise is mostly the GPU's.
@@ -151,22 +147,10 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
     // Internal lights on the CPU, with lights that the GPU gather reuses.
     settings.method = Method::Internal;
     let t = Instant::now();
-    let cache = Arc::new(
-        InternalLights::build(
-            &prepared.volume,
-            &prepared.lights,
-            &internal_params(&prepared, &settings),
-            &never,
-        )
-        .unwrap(),
-    );
+    let cache = common::build_lights(&prepared, &settings);
     let build_secs = t.elapsed().as_secs_f64();
-    let cpu_renderer = Renderer::with_lights(prepared.clone(), &settings, Some(cache.clone()));
-    let mut cpu_int = Film::new(IMAGE, IMAGE);
     let t = Instant::now();
-    for pass in 0..spp * 8 {
-        cpu_int.add_pass(&cpu_renderer.pass(pass, &never).unwrap().total);
-    }
+    let cpu_int = common::gather_cpu(&prepared, &settings, &cache, spp * 8);
     let cpu_int_secs = t.elapsed().as_secs_f64();
     let internal_mean = cpu_int.image_mean();
     assert!(internal_mean.min_element() > 0.0 && internal_mean.is_finite());

@@ -42,6 +42,43 @@ pub fn render(prepared: &Arc<Prepared>, method: Method, seed: u64, spp: u32) -> 
     lantern::cpu::render(prepared.clone(), &settings, |_| true)
 }
 
+/// Builds the internal lights on the CPU for `settings` (placement and
+/// walks), for tests that gather with the same lights on two backends.
+pub fn build_lights(
+    prepared: &Prepared,
+    settings: &lantern::scene::RenderSettings,
+) -> Arc<lantern::physics::internal::InternalLights> {
+    let never = std::sync::atomic::AtomicBool::new(false);
+    Arc::new(
+        lantern::physics::internal::InternalLights::build(
+            &prepared.volume,
+            &prepared.lights,
+            &lantern::render::internal_params(prepared, settings),
+            &never,
+        )
+        .expect("not cancelled"),
+    )
+}
+
+/// Gathers `spp` passes on the CPU with cached `lights` (seed and other
+/// settings from `settings`).
+pub fn gather_cpu(
+    prepared: &Arc<Prepared>,
+    settings: &lantern::scene::RenderSettings,
+    lights: &Arc<lantern::physics::internal::InternalLights>,
+    spp: u32,
+) -> Film {
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let renderer =
+        lantern::cpu::Renderer::with_lights(prepared.clone(), settings, Some(lights.clone()));
+    let cam = prepared.camera;
+    let mut film = Film::new(cam.width, cam.height);
+    for pass in 0..spp {
+        film.add_pass(&renderer.pass(pass, &never).expect("not cancelled").total);
+    }
+    film
+}
+
 /// The outcome of comparing two noisy images.
 #[derive(Debug)]
 pub struct Comparison {
