@@ -517,3 +517,158 @@ fn grid_512_cubed_renders_or_names_the_limit() {
         }
     }
 }
+
+// ---- Internal lights built on the GPU (gpu::walks) ----
+//
+// - Placement follows the placement density: a χ² test of the GPU's light
+//   counts per coarse cell (4×4×4 placement cells) against the CPU's
+//   `PlacementDensity` probabilities (a fixed seed), which must also reject
+//   a density off by a 10 % uniform mix; positions inside the box, `ρ(x_i)`
+//   and `V_i = 1/(M p(x_i))` against the CPU's `p` to 1e-3.
+// - Per-light walks agree with the CPU's at the same positions: for each
+//   light the mean of `F`, of the multiply scattered part of `J`, its three
+//   l = 1 SH coefficients, the arriving light, and the per-term energies
+//   `E_k`, each as a z-test with the per-walk (per-estimate) variance of
+//   the CPU's walks; every |z| < 5 and the sum over lights (or over k)
+//   within 4σ. The same statistics against CPU walks with the albedo 10 %
+//   low must fail (the power check).
+// - A gather from GPU-built lights agrees with gathers from CPU-built lights
+//   within the spread of image means between light sets.
+
+use lantern::gpu::walks::{build_internal_lights_gpu, place_lights_gpu};
+use lantern::physics::gated_walk::{accumulate_j_from, GateSettings};
+use lantern::physics::internal::{InternalParams, PLACEMENT_RESOLUTION};
+use lantern::physics::placement::PlacementDensity;
+use lantern::physics::reference::RR_START_DEPTH;
+use lantern::physics::rng::Rng;
+use lantern::physics::sh::sh_basis;
+use lantern::physics::tracking::transmittance;
+use lantern::physics::volume::Volume;
+
+/// The scene's internal-lights parameters with `edit` applied.
+fn walk_params(prepared: &Prepared, edit: impl FnOnce(&mut InternalParams)) -> InternalParams {
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    let mut p = internal_params(prepared, &settings);
+    edit(&mut p);
+    p
+}
+
+/// χ² of `counts` against probabilities `probs` (bins expecting fewer than
+/// 5 pooled), as `(χ² − dof) / √(2 dof)`, with dof.
+fn chi2_z(counts: &[u64], probs: &[f64]) -> (f64, usize) {
+    let n: u64 = counts.iter().sum();
+    let (mut chi2, mut bins) = (0.0, 0usize);
+    let (mut pool_obs, mut pool_exp) = (0.0, 0.0);
+    for (&c, &p) in counts.iter().zip(probs) {
+        let e = p * n as f64;
+        if e < 5.0 {
+            pool_obs += c as f64;
+            pool_exp += e;
+            continue;
+        }
+        chi2 += (c as f64 - e).powi(2) / e;
+        bins += 1;
+    }
+    if pool_exp >= 5.0 {
+        chi2 += (pool_obs - pool_exp).powi(2) / pool_exp;
+        bins += 1;
+    } else {
+        assert!(
+            pool_obs <= 5.0 + 5.0 * pool_exp,
+            "{pool_obs} lights where {pool_exp} expected"
+        );
+    }
+    let dof = bins.saturating_sub(1).max(1);
+    ((chi2 - dof as f64) / (2.0 * dof as f64).sqrt(), dof)
+}
+
+fn placement_case(scene: &str, u_mix: f32) {
+    let Some(ctx) = gpu() else { return };
+    let prepared = prepare_small(scene, 8);
+    let m = 1usize << 17;
+    let params = walk_params(&prepared, |p| {
+        p.lights = m;
+        p.uniform_mix = u_mix;
+        p.seed = 11;
+    });
+    let t = Instant::now();
+    let placed = place_lights_gpu(&ctx, &prepared, &params).unwrap_or_else(|e| panic!("{e:#}"));
+    let secs = t.elapsed().as_secs_f64();
+    let again = place_lights_gpu(&ctx, &prepared, &params).unwrap_or_else(|e| panic!("{e:#}"));
+    assert_eq!(
+        placed.lights, again.lights,
+        "placement is not deterministic"
+    );
+    let vol = &prepared.volume;
+    let sampler = PlacementDensity::build(&vol.density, vol.bounds, PLACEMENT_RESOLUTION, u_mix);
+    assert_eq!(placed.density_integral, sampler.density_integral());
+    let res = sampler.resolution();
+    let (lo, hi) = sampler.bounds();
+    let cell = sampler.cell_size();
+    let coarse = (res + 3) / 4;
+    let coarse_of =
+        |i: u32, j: u32, k: u32| ((i / 4) + coarse.x * ((j / 4) + coarse.y * (k / 4))) as usize;
+    let n_coarse = (coarse.x * coarse.y * coarse.z) as usize;
+    let cell_probs = sampler.cell_probabilities();
+    let u = sampler.u_mix() as f64;
+    let n_cells = (res.x * res.y * res.z) as usize;
+    let mut probs = vec![0.0f64; n_coarse];
+    for k in 0..res.z {
+        for j in 0..res.y {
+            for i in 0..res.x {
+                let c = (i + res.x * (j + res.y * k)) as usize;
+                let rho = cell_probs.get(c).copied().unwrap_or(0.0);
+                probs[coarse_of(i, j, k)] += (1.0 - u) * rho + u / n_cells as f64;
+            }
+        }
+    }
+    let mut counts = vec![0u64; n_coarse];
+    let mut worst_weight = 0.0f64;
+    let mut worst_density = 0.0f64;
+    for (l, &pdf) in placed.lights.iter().zip(&placed.pdfs) {
+        let x = l.position;
+        assert!(
+            x.cmpge(lo).all() && x.cmple(hi).all(),
+            "{x} outside the box"
+        );
+        let g = ((x - lo) / cell).floor().as_uvec3().min(res - 1);
+        counts[coarse_of(g.x, g.y, g.z)] += 1;
+        let p_cpu = sampler.pdf(x) as f64;
+        assert!(pdf > 0.0 && p_cpu > 0.0, "a light where p = 0");
+        worst_weight = worst_weight.max((l.weight as f64 * m as f64 * p_cpu - 1.0).abs());
+        let rho = vol.density.density(x) as f64;
+        worst_density = worst_density.max((l.density as f64 - rho).abs() / rho.max(1e-3));
+    }
+    let (z, dof) = chi2_z(&counts, &probs);
+    // The power check: the same counts against a density with 10 % more
+    // uniform mix.
+    let wrong: Vec<f64> = probs
+        .iter()
+        .map(|p| 0.9 * p + 0.1 / n_coarse as f64)
+        .collect();
+    let (z_wrong, _) = chi2_z(&counts, &wrong);
+    println!(
+        "{scene} GPU placement (M = {m}, u = {u_mix}, {secs:.2} s): χ² z = {z:.2} ({dof} dof), against a 10 % wrong density z = {z_wrong:.1}; max |V M p − 1| = {worst_weight:.2e}, max ρ error {worst_density:.2e}"
+    );
+    assert!(z.abs() < 4.0, "placement χ² z = {z}");
+    assert!(
+        z_wrong > 4.0,
+        "the χ² test cannot tell a 10 % wrong density: z = {z_wrong}"
+    );
+    assert!(
+        worst_weight < 1e-3,
+        "weights: max |V M p − 1| = {worst_weight}"
+    );
+    assert!(worst_density < 1e-3, "ρ(x_i): max error {worst_density}");
+}
+
+#[test]
+fn gpu_placement_follows_density_puffs_grid() {
+    placement_case("assets/scenes/puffs_grid.ron", 0.0);
+}
+
+#[test]
+fn gpu_placement_follows_density_thin_sphere_with_uniform_mix() {
+    placement_case("assets/scenes/thin_sphere.ron", 0.3);
+}
