@@ -58,6 +58,9 @@ const PLACEMENT_LANES: u32 = 64;
 /// sync with `GPU_MAX_GATES − 1` in `shaders/common/gated_walk.wgsl`).
 pub const GPU_MAX_TERMS: u32 = 256;
 
+/// One vec4 of a GPU buffer, read back.
+type Vec4 = [f32; 4];
+
 /// Most workgroups per dispatch along x (WebGPU's guaranteed limit).
 const MAX_GROUPS: u32 = 65_535;
 
@@ -133,6 +136,13 @@ pub fn build_internal_lights_gpu(
             max: GPU_MAX_TERMS as u64,
         });
     }
+    // Refuse before any work if the results cannot be bound.
+    let n_ext = prepared.lights.suns.len() + prepared.lights.points.len();
+    let stride = 2 * sh_count(params.sh_order.min(MAX_ORDER)) + n_ext + params.terms as usize + 1;
+    ctx.check_storage_size(
+        "internal-light walk results",
+        params.lights.max(1) as u64 * stride as u64 * 16,
+    )?;
     let start = Instant::now();
     let build = place(ctx, prepared, params)?;
     ctx.wait_idle()?;
@@ -144,11 +154,8 @@ pub fn build_internal_lights_gpu(
 
     let m = build.light_count as usize;
     let (lights, _) = unpack_placed(&placed_raw, m);
-    let order = params.sh_order.min(MAX_ORDER);
-    let count = sh_count(order);
-    let n_ext = prepared.lights.suns.len() + prepared.lights.points.len();
+    let count = sh_count(params.sh_order.min(MAX_ORDER));
     let gates = params.terms as usize + 1;
-    let stride = 2 * count + n_ext + gates;
     let mut f_coeffs = Vec::with_capacity(m * count);
     let mut multi_coeffs = Vec::with_capacity(m * count);
     let mut arrival = Vec::with_capacity(m * n_ext);
@@ -348,7 +355,7 @@ fn walk(
     build: &Build,
     prepared: &Prepared,
     params: &InternalParams,
-) -> Result<(Vec<[f32; 4]>, Vec<[f32; 4]>), GpuError> {
+) -> Result<(Vec<Vec4>, Vec<Vec4>), GpuError> {
     let ctx = &build.ctx;
     let order = params.sh_order.min(MAX_ORDER);
     let count = sh_count(order) as u32;
