@@ -17,6 +17,10 @@
 //!   that a 10 % error in the field form's `L₁` on the GPU fails each
 //!   field case (measured: 6.3–7.9σ).
 //!
+//! - With an adapter: the internal lights built on the GPU (placement,
+//!   walks, a gather with them) against the CPU; see the section at the
+//!   end of this file.
+//!
 //! Without an adapter the GPU cases print a notice and pass, unless
 //! `LANTERN_REQUIRE_GPU=1` (set in CI, where lavapipe provides one).
 
