@@ -15,8 +15,9 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cpu::Renderer;
+use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuRenderer};
-use crate::physics::internal::InternalLights;
+use crate::physics::internal::BuildTimings;
 use crate::render::export::write_image;
 use crate::render::film::image_mean;
 use crate::render::tonemap::ViewTransform;
@@ -47,7 +48,8 @@ pub enum BackendArg {
     /// The rayon CPU renderer (both methods).
     #[default]
     Cpu,
-    /// The wgpu compute renderer (the reference method so far).
+    /// The wgpu compute renderer (both methods; internal lights built on
+    /// the GPU).
     Gpu,
 }
 
@@ -224,8 +226,9 @@ pub enum Command {
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
-        /// Which backend renders (gpu: for the internal-lights method only
-        /// the gather runs on the GPU; the lights are built on the CPU).
+        /// Which backend renders (gpu: for the internal-lights method the
+        /// lights are placed and walked on the GPU too; only their spatial
+        /// indices are built on the CPU).
         #[arg(long, value_enum, default_value_t = BackendArg::Cpu)]
         backend: BackendArg,
         /// Exposure in stops, for PNG output.
@@ -258,8 +261,9 @@ pub enum Command {
         /// The estimator.
         #[arg(long, value_enum, default_value_t = MethodArg::Reference)]
         method: MethodArg,
-        /// Which backend renders (gpu: for the internal-lights method only
-        /// the gather runs on the GPU; the lights are built on the CPU).
+        /// Which backend renders (gpu: for the internal-lights method the
+        /// lights are placed and walked on the GPU too; only their spatial
+        /// indices are built on the CPU).
         #[arg(long, value_enum, default_value_t = BackendArg::Cpu)]
         backend: BackendArg,
         /// Internal-lights parameters.
@@ -523,7 +527,7 @@ fn render_gpu(
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let ctx = gpu_context()?;
     let t_build = Instant::now();
-    let mut renderer = gpu_renderer(&ctx, prepared, settings)?;
+    let (mut renderer, _) = gpu_renderer(&ctx, prepared, settings)?;
     renderer.finish()?;
     let build_secs = t_build.elapsed().as_secs_f64();
     let bar = pass_bar(settings.spp);
@@ -576,48 +580,56 @@ fn render_gpu(
 }
 
 /// The GPU renderer for `settings.method`; for the internal-lights method
-/// the lights are built on the CPU first (placement and walks run there).
+/// the lights are built on the GPU first (placement and walks, then the
+/// spatial indices on the CPU), and their build times come back too.
 fn gpu_renderer(
     ctx: &GpuContext,
     prepared: &Prepared,
     settings: &RenderSettings,
-) -> Result<GpuRenderer> {
+) -> Result<(GpuRenderer, Option<BuildTimings>)> {
     match settings.method {
-        Method::Reference => Ok(GpuRenderer::reference(ctx, prepared, settings.seed)?),
+        Method::Reference => Ok((GpuRenderer::reference(ctx, prepared, settings.seed)?, None)),
         Method::Internal => {
             let params = internal_params(prepared, settings);
-            let never = AtomicBool::new(false);
-            let lights = InternalLights::build(&prepared.volume, &prepared.lights, &params, &never)
-                .context("internal-light build was cancelled")?;
+            let lights = build_internal_lights_gpu(ctx, prepared, &params)?;
             println!(
-                "internal lights (built on the CPU): M = {}, s* = {:.4}, N = {}, K = {}, clock {:?}: placed in {:.3} s, walked in {:.3} s",
+                "internal lights (built on the GPU): M = {}, s* = {:.4}, N = {}, K = {}, clock {:?}: placed in {:.3} s, walked in {:.3} s (GPU), indexed in {:.3} s (CPU)",
                 lights.len(),
                 lights.s_star,
                 lights.params.terms,
                 lights.params.walks,
                 lights.params.clock,
                 lights.timings.placement,
-                lights.timings.walks + lights.timings.index,
+                lights.timings.walks,
+                lights.timings.index,
             );
-            Ok(GpuRenderer::internal(
+            let renderer = GpuRenderer::internal(
                 ctx,
                 prepared,
                 &lights,
                 settings.internal.light_samples,
                 settings.seed,
-            )?)
+            )?;
+            Ok((renderer, Some(lights.timings)))
         }
     }
 }
 
 /// Times `spp` passes of the GPU renderer `repeats` times (each with its
 /// own seed, accumulation cleared); returns the set-up time (internal
-/// lights built on the CPU, pipeline, upload) and the median render time.
-fn bench_gpu(ctx: &GpuContext, prepared: &Prepared, spp: u32, repeats: u32) -> Result<(f64, f64)> {
+/// lights built on the GPU, pipeline, upload), the median render time and,
+/// for the internal-lights method, the re-sampling time on the GPU
+/// (placement and walks).
+fn bench_gpu(
+    ctx: &GpuContext,
+    prepared: &Prepared,
+    spp: u32,
+    repeats: u32,
+) -> Result<(f64, f64, Option<f64>)> {
     let start = Instant::now();
     let mut settings = prepared.scene.render.clone();
     settings.seed = 0;
-    let mut renderer = gpu_renderer(ctx, prepared, &settings)?;
+    let (mut renderer, timings) = gpu_renderer(ctx, prepared, &settings)?;
     renderer.finish()?;
     let build = start.elapsed().as_secs_f64();
     // One untimed pass: the first dispatch may still compile or page in.
@@ -635,7 +647,11 @@ fn bench_gpu(ctx: &GpuContext, prepared: &Prepared, spp: u32, repeats: u32) -> R
         times.push(start.elapsed().as_secs_f64());
     }
     times.sort_by(f64::total_cmp);
-    Ok((build, times[times.len() / 2]))
+    Ok((
+        build,
+        times[times.len() / 2],
+        timings.map(|t| t.placement + t.walks),
+    ))
 }
 
 fn bench_command(
@@ -666,7 +682,7 @@ fn bench_command(
         scenes
     };
     println!(
-        "{:<28} {:>10} {:>6} {:>12} {:>10} {:>14} {:>14}",
+        "{:<28} {:>10} {:>6} {:>12} {:>10} {:>14} {:>14}{}",
         "scene",
         "size",
         "spp",
@@ -676,6 +692,10 @@ fn bench_command(
         match backend {
             BackendArg::Cpu => "re-sample s",
             BackendArg::Gpu => "set-up s",
+        },
+        match (backend, method) {
+            (BackendArg::Gpu, Method::Internal) => format!(" {:>16}", "GPU re-sample s"),
+            _ => String::new(),
         }
     );
     for path in scenes {
@@ -696,9 +716,9 @@ fn bench_command(
             .map(|n| n.to_string_lossy())
             .unwrap_or_default();
         if let Some(ctx) = &gpu {
-            let (build, median) = bench_gpu(ctx, &prepared, spp, repeats)
+            let (build, median, resample) = bench_gpu(ctx, &prepared, spp, repeats)
                 .with_context(|| format!("{}", path.display()))?;
-            print_bench_row(&name, w, h, spp, median, build);
+            print_bench_row(&name, w, h, spp, median, build, resample);
             continue;
         }
         let never = AtomicBool::new(false);
@@ -721,23 +741,35 @@ fn bench_command(
         builds.sort_by(f64::total_cmp);
         let median = times[times.len() / 2];
         let build = builds[builds.len() / 2];
-        print_bench_row(&name, w, h, spp, median, build);
+        print_bench_row(&name, w, h, spp, median, build, None);
     }
     Ok(())
 }
 
 /// One row of `lantern bench`'s table: median pass time per `spp`
-/// passes, passes and samples per second, and the re-sampling time.
-fn print_bench_row(name: &str, w: u32, h: u32, spp: u32, median: f64, build: f64) {
+/// passes, passes and samples per second, the re-sampling (CPU) or set-up
+/// (GPU) time, and the GPU's re-sampling time (placement and walks) if any.
+fn print_bench_row(
+    name: &str,
+    w: u32,
+    h: u32,
+    spp: u32,
+    median: f64,
+    build: f64,
+    gpu_resample: Option<f64>,
+) {
     let samples = w as f64 * h as f64 * spp as f64;
     println!(
-        "{:<28} {:>10} {:>6} {:>12.3} {:>10.2} {:>14.3} {:>14.3}",
+        "{:<28} {:>10} {:>6} {:>12.3} {:>10.2} {:>14.3} {:>14.3}{}",
         name,
         format!("{w}×{h}"),
         spp,
         median,
         spp as f64 / median,
         samples / median / 1e6,
-        build
+        build,
+        gpu_resample
+            .map(|t| format!(" {t:>16.3}"))
+            .unwrap_or_default()
     );
 }

@@ -1,10 +1,37 @@
-// The path-length clock (METHOD.md §3, §7). Mirrors `march_clock` of
-// src/physics/gated_walk.rs; the time-gated walks themselves still run on
-// the CPU only.
+// The path-length clock and the time-gated backward walk that estimates
+// `J_N = Σ_{k=0}^{N} G(k s*) S₁` at a point (METHOD.md §3, §4, §7). Mirrors
+// src/physics/gated_walk.rs: `march_clock`, the private `walk` and
+// `accumulate_j_from`. WGSL has no closures, so the CPU's `on_gate`
+// callback of `accumulate_j_from` is written out as `gate_add`.
+
+// Clock tags (`Clock`; keep in sync with `CLOCK_*` in src/gpu/mirrors.rs).
+const CLOCK_GEOMETRIC: u32 = 0u;
+const CLOCK_OPTICAL_DEPTH: u32 = 1u;
 
 // Lattice steps per majorant cell for the optical-depth quadrature
 // (`CLOCK_STEPS_PER_CELL`).
 const CLOCK_STEPS_PER_CELL: f32 = 2.0;
+
+// Most gates a walk on the GPU records, `N + 1` (a private array per
+// invocation; keep in sync with `GPU_MAX_TERMS` in src/gpu/walks.rs, which
+// refuses larger `N` with an error).
+const GPU_MAX_GATES: u32 = 257u;
+
+// A guard against a walk that never ends, which the CPU does not need (as
+// `MAX_COLLISIONS_GUARD` of reference.wgsl: the roulette survives at most
+// 0.95 per collision).
+const WALK_COLLISIONS_GUARD: u32 = 4096u;
+
+// Per-gate terms of one walk, `k = 0..=N`.
+alias GateTerms = array<vec3<f32>, GPU_MAX_GATES>;
+
+// Parameters of the time-gated walk (`GateSettings`).
+struct GateSettings {
+    s_star: f32,
+    n_terms: u32,
+    clock: u32,
+    rr_start: u32,
+}
 
 // Where a clock budget runs out along a ray (`ClockMarch`): `reached` at
 // ray parameter `value`, or the ray ended first and the clock advanced by
@@ -77,4 +104,136 @@ fn march_clock(
         }
     }
     return ClockMarch(acc, false);
+}
+
+// One gate of `accumulate_j_from` (its `on_gate` closure): adds
+// `w · α σ_t · ρ · (S₁/b)(z_k, n_k)` to term `k`, with `ρ = ρ(z_k)` for the
+// geometric clock and `ρ(z)` for the optical-depth clock.
+fn gate_add(
+    k: u32,
+    w: vec3<f32>,
+    zk: vec3<f32>,
+    nk: vec3<f32>,
+    settings: GateSettings,
+    first: u32,
+    rho_z: f32,
+    rng: ptr<function, Rng>,
+    out: ptr<function, GateTerms>,
+) {
+    var rho = rho_z;
+    if settings.clock == CLOCK_GEOMETRIC {
+        rho = density(zk);
+    }
+    if k < first || rho <= 0.0 || all(w == vec3<f32>(0.0)) {
+        return;
+    }
+    let scatter = scene.medium.albedo * scene.medium.sigma_t;
+    let source = single_scatter_source(zk, nk, rng);
+    (*out)[k] += w * scatter * rho * source;
+}
+
+// Adds one walk's estimate of `Ĵ_k(z, n)`, `k = first..=N`, to `out`
+// (`accumulate_j_from`, with the walk of `walk` inlined): a backward walk
+// from `z` along `−n` by spectral tracking, albedo and Russian roulette at
+// real collisions, phase-sampled directions, gates at clock `k s*`; leaving
+// the box ends it. `settings.n_terms` must be below `GPU_MAX_GATES`.
+fn accumulate_j_from(
+    z: vec3<f32>,
+    n: vec3<f32>,
+    settings: GateSettings,
+    first: u32,
+    rng: ptr<function, Rng>,
+    out: ptr<function, GateTerms>,
+) {
+    let rho_z = density(z);
+    if settings.clock == CLOCK_OPTICAL_DEPTH && rho_z <= 0.0 {
+        return;
+    }
+    let geometric = settings.clock == CLOCK_GEOMETRIC;
+    let s_star = max(settings.s_star, 0.0);
+    let last = min(settings.n_terms, GPU_MAX_GATES - 1u);
+    var weight = vec3<f32>(1.0);
+    gate_add(0u, weight, z, n, settings, first, rho_z, rng, out);
+    if last == 0u {
+        return;
+    }
+    var next = 1u;
+    var origin = z;
+    var dir = -n;
+    // Clock value at `origin`.
+    var clock_at_origin = 0.0;
+    var collisions = 0u;
+    // One flight per iteration: from `origin` to the next gate, the next
+    // real collision, or the exit of the box, whichever comes first.
+    loop {
+        let clip = medium_clip(origin, dir);
+        if !clip.hit {
+            return;
+        }
+        var clock_at_enter = clock_at_origin;
+        if geometric {
+            clock_at_enter = clock_at_origin + clip.t0;
+        }
+        // Gates in the vacuum before the box (only when `z` is outside it,
+        // and only for the geometric clock).
+        while geometric && f32(next) * s_star <= clock_at_enter {
+            let t = f32(next) * s_star - clock_at_origin;
+            gate_add(next, weight, origin + dir * t, -dir, settings, first, rho_z, rng, out);
+            if next == last {
+                return;
+            }
+            next += 1u;
+        }
+        let gate_clock = f32(next) * s_star;
+        let budget = gate_clock - clock_at_enter;
+        let march = march_clock(settings.clock, origin, dir, clip.t0, clip.t1, clip.t1, budget);
+        var flight_end = clip.t1;
+        if march.reached {
+            flight_end = march.value;
+        }
+        let flight = free_flight(origin, dir, clip.t0, flight_end, &weight, rng);
+        if flight.hit {
+            let to_hit = march_clock(settings.clock, origin, dir, clip.t0, clip.t1, flight.t, BIG);
+            var advanced = 0.0;
+            if !to_hit.reached {
+                advanced = to_hit.value;
+            }
+            // Rounding must not put the collision past the gate.
+            clock_at_origin = min(clock_at_enter + advanced, gate_clock);
+            origin += dir * flight.t;
+            weight *= scene.medium.albedo;
+            collisions += 1u;
+            if collisions >= WALK_COLLISIONS_GUARD {
+                return;
+            }
+            if collisions >= settings.rr_start {
+                let q = min(max_element(weight), 0.95);
+                if q <= 0.0 || rng_next_f32(rng) >= q {
+                    return;
+                }
+                weight /= q;
+            }
+            let u1 = rng_next_f32(rng);
+            let u2 = rng_next_f32(rng);
+            dir = sample_hg(scene.medium.g, dir, u1, u2);
+        } else {
+            if all(weight == vec3<f32>(0.0)) {
+                return;
+            }
+            // No gate before the exit: the walk left the box, and nothing
+            // comes back from the vacuum outside it.
+            if !march.reached {
+                return;
+            }
+            origin += dir * march.value;
+            gate_add(next, weight, origin, -dir, settings, first, rho_z, rng, out);
+            if next == last {
+                return;
+            }
+            next += 1u;
+            // The flight goes on from the gate: flights are memoryless, and
+            // the quadrature lattice is re-anchored here.
+            clock_at_origin = gate_clock;
+        }
+    }
 }

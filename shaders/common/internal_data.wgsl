@@ -45,9 +45,7 @@ struct GatherParams {
     l1_form: u32,
 }
 
-// Clock tags (keep in sync with `CLOCK_*` in src/gpu/mirrors.rs).
-const CLOCK_GEOMETRIC: u32 = 0u;
-const CLOCK_OPTICAL_DEPTH: u32 = 1u;
+// The clock tags `CLOCK_*` are in gated_walk.wgsl.
 
 // Forms of the gather's L₁ (keep in sync with `L1_*` in src/gpu/mirrors.rs).
 const L1_FIELD: u32 = 0u;

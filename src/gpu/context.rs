@@ -54,6 +54,16 @@ pub enum GpuError {
         /// wgpu's message.
         message: String,
     },
+    /// A parameter beyond what the GPU backend supports.
+    #[error("{what} = {value} exceeds the GPU backend's {max}; use the CPU backend")]
+    Unsupported {
+        /// The parameter (e.g. "N (series truncation)").
+        what: &'static str,
+        /// Its value.
+        value: u64,
+        /// The largest supported value.
+        max: u64,
+    },
     /// Reading results back from the GPU failed.
     #[error("reading back {what} failed: {message}")]
     Readback {

@@ -1,8 +1,9 @@
 //! The final gather of the internal-lights method (METHOD.md §6) on the
 //! GPU, both forms of `L₁` (the field form and the point lights,
 //! [`L1Form`], chosen in the uniform), with the internal lights built on
-//! the CPU ([`InternalLights::build`]: placement and time-gated walks stay
-//! there) and uploaded once: positions and weights, the SH coefficients of
+//! the CPU ([`InternalLights::build`]) or on the GPU
+//! ([`super::walks::build_internal_lights_gpu`]) and uploaded once:
+//! positions and weights, the SH coefficients of
 //! the multiply scattered part of `J`, the light arriving at each light
 //! from the external ones, and both spatial indices of
 //! `physics::light_index` (the fine grid of the kernel reconstruction and

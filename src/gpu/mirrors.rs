@@ -154,7 +154,7 @@ pub struct GpuLight {
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 
 /// Clock tags (keep in sync with `CLOCK_*` in
-/// `shaders/common/internal_data.wgsl`).
+/// `shaders/common/gated_walk.wgsl`).
 pub const CLOCK_GEOMETRIC: u32 = 0;
 /// The optical-depth clock.
 pub const CLOCK_OPTICAL_DEPTH: u32 = 1;
@@ -235,6 +235,71 @@ pub struct GpuGatherParams {
     pub l1_form: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 176);
+
+/// The placement grid and mixture of the internal lights
+/// (`PlacementDensity`). Keep in sync with `PlacementParams` in
+/// `shaders/placement/main.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuPlacementParams {
+    /// Minimum corner of the placement grid (the medium's box).
+    pub grid_min: [f32; 3],
+    /// Uniform fraction `u` of the mixture.
+    pub u_mix: f32,
+    /// Maximum corner of the placement grid.
+    pub grid_max: [f32; 3],
+    /// `Z = ∫_B ρ̃`.
+    pub integral: f32,
+    /// Size of one cell.
+    pub cell: [f32; 3],
+    /// `|B|`.
+    pub box_volume: f32,
+    /// Cells per axis.
+    pub res: [u32; 3],
+    /// Number of cells (entries of the alias table).
+    pub cell_count: u32,
+    /// Number of lights `M`.
+    pub light_count: u32,
+    /// `1 / M`.
+    pub inv_light_count: f32,
+    /// Padding.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuPlacementParams>() == 80);
+
+/// Parameters of the internal lights' walks. Keep in sync with
+/// `WalkParams` in `shaders/walks/main.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuWalkParams {
+    /// Window length `s*`.
+    pub s_star: f32,
+    /// Series truncation `N`.
+    pub n_terms: u32,
+    /// One of `CLOCK_*`.
+    pub clock: u32,
+    /// Real collisions after which Russian roulette starts.
+    pub rr_start: u32,
+    /// Walks per light `K`.
+    pub walks: u32,
+    /// SH order.
+    pub sh_order: u32,
+    /// SH coefficients per light, `(sh_order + 1)²`.
+    pub sh_count: u32,
+    /// Ratio-tracking estimates per arriving light.
+    pub tr_estimates: u32,
+    /// Number of lights `M`.
+    pub light_count: u32,
+    /// First light of this dispatch.
+    pub light_offset: u32,
+    /// First walk of this dispatch.
+    pub walk_offset: u32,
+    /// vec4 per light in the output.
+    pub record_stride: u32,
+}
+const _: () = assert!(std::mem::size_of::<GpuWalkParams>() == 48);
 
 /// One pixel's running statistics on the GPU: Welford mean and sum of
 /// squared deviations of the estimate, and the mean of its single-scattering

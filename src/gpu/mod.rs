@@ -10,15 +10,16 @@
 //! - [`gather`]: the internal-lights final gather (METHOD.md §6) with the
 //!   lights built on the CPU and uploaded with their SH coefficients and
 //!   spatial indices.
-//!
-//! Still on the CPU only: placing the internal lights and their time-gated
-//! walks (METHOD.md §4–§5).
+//! - [`walks`]: the internal lights built on the GPU (METHOD.md §4–§5):
+//!   placement, time-gated walks and SH projection, finished by the CPU's
+//!   spatial indices.
 
 pub mod context;
 pub mod gather;
 pub mod mirrors;
 pub mod renderer;
 pub mod shaders;
+pub mod walks;
 
 pub use context::{GpuContext, GpuError};
 pub use renderer::{GpuImage, GpuRenderer};

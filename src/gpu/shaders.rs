@@ -57,7 +57,8 @@ pub const REFERENCE_MAIN: ShaderPart = part!("reference/main.wgsl");
 pub const SH: ShaderPart = part!("common/sh.wgsl");
 /// The cached internal lights' bindings 6–8 (`gpu/gather.rs`).
 pub const INTERNAL_DATA: ShaderPart = part!("common/internal_data.wgsl");
-/// The path-length clock (`physics/gated_walk.rs`, `march_clock`).
+/// The path-length clock and the time-gated walk
+/// (`physics/gated_walk.rs`).
 pub const GATED_WALK: ShaderPart = part!("common/gated_walk.wgsl");
 /// Light grids (`physics/light_index.rs`).
 pub const LIGHT_INDEX: ShaderPart = part!("common/light_index.wgsl");
@@ -68,6 +69,14 @@ pub const GATHER: ShaderPart = part!("common/gather.wgsl");
 /// The internal-lights renderer's entry point (`cpu/mod.rs`, internal
 /// method).
 pub const GATHER_MAIN: ShaderPart = part!("gather/main.wgsl");
+
+/// Placement of the internal lights (`physics/placement.rs`).
+pub const PLACEMENT: ShaderPart = part!("common/placement.wgsl");
+/// The placement's entry point (`physics/placement.rs`, `sample_lights`).
+pub const PLACEMENT_MAIN: ShaderPart = part!("placement/main.wgsl");
+/// The walks' entry point (`physics/internal.rs`, the walk loop of
+/// `InternalLights::build_at`).
+pub const WALKS_MAIN: ShaderPart = part!("walks/main.wgsl");
 
 /// A shader module: a name and its parts in dependency order.
 #[derive(Clone, Copy, Debug)]
@@ -127,8 +136,31 @@ pub const GATHER_MODULE: ModuleSource = ModuleSource {
     entry_point: "gather_pass",
 };
 
+/// Placement of the internal lights, one invocation per light.
+pub const PLACEMENT_MODULE: ModuleSource = ModuleSource {
+    name: "placement",
+    parts: &[SCENE, RNG, VOLUME, PLACEMENT, PLACEMENT_MAIN],
+    entry_point: "place_lights",
+};
+
+/// The internal lights' time-gated walks and SH projection, one workgroup
+/// per light and one walk per invocation per dispatch.
+pub const WALKS_MODULE: ModuleSource = ModuleSource {
+    name: "walks",
+    parts: &[
+        RNG, FRAME, PHASE, SCENE, VOLUME, MAJORANT, TRACKING, LIGHTS, REFERENCE, SH, GATED_WALK,
+        WALKS_MAIN,
+    ],
+    entry_point: "walk_lights",
+};
+
 /// Every module the backend builds (the tests validate each).
-pub const MODULES: &[ModuleSource] = &[REFERENCE_MODULE, GATHER_MODULE];
+pub const MODULES: &[ModuleSource] = &[
+    REFERENCE_MODULE,
+    GATHER_MODULE,
+    PLACEMENT_MODULE,
+    WALKS_MODULE,
+];
 
 impl ModuleSource {
     /// The module's WGSL text: its parts concatenated, each preceded by a

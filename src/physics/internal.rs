@@ -45,11 +45,12 @@ use super::tracking::transmittance;
 use super::volume::{DensityField, Volume};
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) of the walks, apart
-/// from the placement's and the renders'.
-const WALK_PASS: u32 = 0x7761_6c6b;
+/// from the placement's and the renders' (keep in sync with `WALK_PASS` in
+/// `shaders/walks/main.wgsl`).
+pub const WALK_PASS: u32 = 0x7761_6c6b;
 
 /// Cells of the placement density along the longest axis of the box.
-const PLACEMENT_RESOLUTION: u32 = 64;
+pub const PLACEMENT_RESOLUTION: u32 = 64;
 
 /// Lights per cluster of the gather's light selection, on average.
 const LIGHTS_PER_CLUSTER: f32 = 24.0;
@@ -215,7 +216,31 @@ impl InternalLights {
         if cancel.load(Ordering::Relaxed) {
             return None;
         }
+        let mut out = Self::build_at(
+            vol,
+            external,
+            params,
+            lights,
+            placement.density_integral,
+            cancel,
+        )?;
+        out.timings.placement = t_place;
+        Some(out)
+    }
 
+    /// Runs the walks of [`InternalLights::build`] for lights already
+    /// placed (`density_integral`: the placement's `∫ρ`) and builds the
+    /// indices; `timings.placement` is left at zero. Returns `None` if
+    /// `cancel` is set meanwhile. The GPU tests walk the GPU's lights here.
+    pub fn build_at<D: DensityField>(
+        vol: &Volume<D>,
+        external: &Lights,
+        params: &InternalParams,
+        lights: Vec<InternalLight>,
+        density_integral: f32,
+        cancel: &AtomicBool,
+    ) -> Option<Self> {
+        let m = lights.len();
         let start = Instant::now();
         let order = params.sh_order.min(MAX_ORDER);
         let count = sh_count(order);
@@ -324,9 +349,8 @@ impl InternalLights {
             multi_coeffs,
             arrival,
             term_energy,
-            placement.density_integral,
+            density_integral,
         );
-        out.timings.placement = t_place;
         out.timings.walks = t_walk;
         Some(out)
     }
@@ -517,6 +541,24 @@ impl InternalLights {
         let mut y = [0.0f32; MAX_COUNT];
         sh_basis(self.sh_order, n, &mut y);
         self.eval_s1(i, n) + self.eval_multi_with(i, &y)
+    }
+
+    /// Light `i`'s SH coefficients of `F_i` (`(sh_order + 1)²` of them).
+    pub fn f_coefficients(&self, i: usize) -> &[Vec3] {
+        &self.f_coeffs[i * self.sh_count..(i + 1) * self.sh_count]
+    }
+
+    /// Light `i`'s SH coefficients of the multiply scattered part
+    /// `Σ_{k≥1} J_k` of `J_i`.
+    pub fn multi_coefficients(&self, i: usize) -> &[Vec3] {
+        &self.multi_coeffs[i * self.sh_count..(i + 1) * self.sh_count]
+    }
+
+    /// The light arriving at light `i` from each external light (suns
+    /// first), `T E`.
+    pub fn arrival(&self, i: usize) -> &[Vec3] {
+        let n_ext = self.arrival.len() / self.lights.len().max(1);
+        &self.arrival[i * n_ext..(i + 1) * n_ext]
     }
 
     /// The mean of `F_i` over directions, `∫F_i dn / 4π`.

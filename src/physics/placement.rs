@@ -42,8 +42,9 @@ use super::rng::Rng;
 use super::volume::DensityField;
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) used for placement, so
-/// that it does not share numbers with renders using the same seed.
-const PLACEMENT_PASS: u32 = 0x706c_6163;
+/// that it does not share numbers with renders using the same seed (keep in
+/// sync with `PLACEMENT_PASS` in `shaders/common/placement.wgsl`).
+pub const PLACEMENT_PASS: u32 = 0x706c_6163;
 
 /// One internal light's position and the volume it stands for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -215,6 +216,76 @@ impl PlacementDensity {
         }
         let rho = self.interpolated_density(x) as f64;
         ((1.0 - self.u_mix as f64) * rho / self.integral) as f32 + uniform
+    }
+
+    /// The box `(min, max)` the density covers.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        (self.min, self.max)
+    }
+
+    /// Cells along each axis.
+    pub fn resolution(&self) -> UVec3 {
+        self.res
+    }
+
+    /// The size of one cell.
+    pub fn cell_size(&self) -> Vec3 {
+        self.cell
+    }
+
+    /// `ρ` at the `(res + 1)³` cell corners, x fastest.
+    pub fn corners(&self) -> &[f32] {
+        &self.corners
+    }
+
+    /// The probability with which the `ρ̃` part of the mixture picks each
+    /// cell (x fastest): its share of `Z`. Empty if `Z = 0`.
+    pub fn cell_probabilities(&self) -> Vec<f64> {
+        let total = self.cdf.last().copied().unwrap_or(0.0);
+        if total <= 0.0 || !total.is_finite() {
+            return Vec::new();
+        }
+        let mut prev = 0.0;
+        self.cdf
+            .iter()
+            .map(|&c| {
+                let p = (c - prev) / total;
+                prev = c;
+                p
+            })
+            .collect()
+    }
+
+    /// Walker's alias table of [`PlacementDensity::cell_probabilities`]
+    /// (Vose's construction, in f64): cell `i` is picked by drawing `i`
+    /// uniformly and keeping it with probability `threshold[i]`, else
+    /// taking `alias[i]`. The GPU samples cells with it in O(1), where a
+    /// binary search over the f64 cumulative table is not available
+    /// (`shaders/common/placement.wgsl`). Empty if `Z = 0`.
+    pub fn alias_table(&self) -> (Vec<f32>, Vec<u32>) {
+        let probs = self.cell_probabilities();
+        let n = probs.len();
+        let mut threshold = vec![1.0f32; n];
+        let mut alias: Vec<u32> = (0..n as u32).collect();
+        let mut scaled: Vec<f64> = probs.iter().map(|p| p * n as f64).collect();
+        let (mut small, mut large): (Vec<usize>, Vec<usize>) =
+            (0..n).partition(|&i| scaled[i] < 1.0);
+        while let (Some(&s), Some(&l)) = (small.last(), large.last()) {
+            small.pop();
+            threshold[s] = scaled[s] as f32;
+            alias[s] = l as u32;
+            scaled[l] -= 1.0 - scaled[s];
+            if scaled[l] < 1.0 {
+                large.pop();
+                small.push(l);
+            }
+        }
+        // What is left has probability one up to rounding.
+        for i in small.into_iter().chain(large) {
+            threshold[i] = 1.0;
+            alias[i] = i as u32;
+        }
+        (threshold, alias)
     }
 
     /// Draws one point with density [`PlacementDensity::pdf`] and returns
@@ -524,6 +595,22 @@ mod tests {
                 // 99.9th percentile of χ² with 511 degrees of freedom.
                 assert!(chi2 < 614.0, "u = {u}, {name}: χ² = {chi2}");
             }
+        }
+    }
+
+    #[test]
+    fn alias_table_reproduces_cell_probabilities() {
+        let sampler = PlacementDensity::build(&Blob, BLOB_BOX, 12, 0.0);
+        let probs = sampler.cell_probabilities();
+        let (threshold, alias) = sampler.alias_table();
+        let n = probs.len();
+        let mut got = vec![0.0f64; n];
+        for i in 0..n {
+            got[i] += threshold[i] as f64 / n as f64;
+            got[alias[i] as usize] += (1.0 - threshold[i] as f64) / n as f64;
+        }
+        for (g, p) in got.iter().zip(&probs) {
+            assert!((g - p).abs() < 1e-7 * p.max(1e-3), "{g} vs {p}");
         }
     }
 

@@ -1,0 +1,178 @@
+// The internal lights' walks (METHOD.md §4, §5): one workgroup per light,
+// one time-gated walk per invocation and dispatch. Mirrors the walk loop of
+// `InternalLights::build_at` in src/physics/internal.rs: `K` directions on a
+// spherical Fibonacci lattice under a random rotation, one
+// `accumulate_j_from(…, first = 1, …)` per direction, projected onto real
+// SH (`F`: the k = 1 term; `multi`: Σ_{k≥1}), the per-term energies
+// `E_k += V_i Ĵ_k 4π/K`, and the light arriving from each external light
+// (ratio tracking, `tr_estimates` per light). A dispatch covers the walks
+// `walk_offset .. walk_offset + 64` of each light and adds its sums to
+// `walk_out`, so that no invocation runs more than one walk (lavapipe caps
+// the loop iterations of an invocation). WGSL has no float atomics: the
+// workgroup reduces its walks in shared memory, eight quantities a round.
+//
+// Random streams (the CPU uses one stream per light for everything): the
+// rotation, then the arrival from `(seed, i, WALK_PASS)`, walk `w` from
+// `(seed, i, WALK_PASS + 1 + w)`. Same estimator, other random numbers.
+//
+// Per light, `walk_out` holds `record_stride` vec4 (xyz used): `sh_count`
+// coefficients of `F`, `sh_count` of the multiply scattered part,
+// `external_count` arriving lights, `n_terms + 1` term energies. Keep
+// `WalkParams` in sync with `GpuWalkParams` in src/gpu/mirrors.rs.
+
+// Stream index of the walks (`WALK_PASS` in src/physics/internal.rs).
+const WALK_PASS: u32 = 0x77616c6bu;
+
+// Invocations (walks) per workgroup; keep in sync with `WALK_LANES` in
+// src/gpu/walks.rs.
+const WALK_LANES: u32 = 64u;
+
+// Quantities reduced per round of the workgroup reduction.
+const ROUND: u32 = 8u;
+
+// `π (3 − √5)`, the golden angle of the spherical Fibonacci lattice.
+const GOLDEN_ANGLE: f32 = 2.399963;
+
+// Parameters of the walks.
+struct WalkParams {
+    s_star: f32,
+    n_terms: u32,
+    clock: u32,
+    rr_start: u32,
+    // Walks per light `K`.
+    walks: u32,
+    sh_order: u32,
+    sh_count: u32,
+    // Transmittance estimates per arriving light.
+    tr_estimates: u32,
+    light_count: u32,
+    // First light and first walk of this dispatch.
+    light_offset: u32,
+    walk_offset: u32,
+    record_stride: u32,
+}
+
+@group(0) @binding(5) var<uniform> walk_params: WalkParams;
+// Two vec4 per light, as the placement writes them.
+@group(0) @binding(6) var<storage, read> placed: array<vec4<f32>>;
+// Per light `record_stride` vec4 (see above), accumulated.
+@group(0) @binding(7) var<storage, read_write> walk_out: array<vec4<f32>>;
+
+var<workgroup> partial: array<vec4<f32>, 512>;
+
+// Rotates `v` by the unit quaternion `q` (xyz: vector part).
+fn quat_rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
+    let t = 2.0 * cross(q.xyz, v);
+    return v + q.w * t + cross(q.xyz, t);
+}
+
+// A uniformly random rotation (Shoemake's uniform unit quaternion,
+// `random_rotation`).
+fn random_rotation(rng: ptr<function, Rng>) -> vec4<f32> {
+    let u1 = rng_next_f32(rng);
+    let u2 = rng_next_f32(rng);
+    let u3 = rng_next_f32(rng);
+    let a = sqrt(1.0 - u1);
+    let b = sqrt(u1);
+    let tau = 2.0 * PI;
+    return normalize(vec4<f32>(a * sin(tau * u2), a * cos(tau * u2), b * sin(tau * u3), b * cos(tau * u3)));
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn walk_lights(
+    @builtin(workgroup_id) group: vec3<u32>,
+    @builtin(local_invocation_index) lane: u32,
+) {
+    let wp = walk_params;
+    let i = wp.light_offset + group.x;
+    if i >= wp.light_count {
+        return;
+    }
+    let light = placed[2u * i];
+    let x = light.xyz;
+    let rho = light.w;
+    let volume = placed[2u * i + 1u].x;
+    let count = wp.sh_count;
+    let terms = min(wp.n_terms, GPU_MAX_GATES - 1u);
+    let record = i * wp.record_stride;
+    let n_ext = light_count();
+    let energy_at = record + 2u * count + n_ext;
+    let scatter = scene.medium.albedo * scene.medium.sigma_t;
+
+    var rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_PASS);
+    let rotation = random_rotation(&rng);
+    let phi0 = 2.0 * PI * rng_next_f32(&rng);
+    let w_dir = 4.0 * PI / f32(wp.walks);
+
+    // This invocation's walk.
+    let w = wp.walk_offset + lane;
+    var per_walk: GateTerms;
+    var n = vec3<f32>(0.0, 0.0, 1.0);
+    if w < wp.walks {
+        let z = 1.0 - f32(2u * w + 1u) / f32(wp.walks);
+        let phi = phi0 + f32(w) * GOLDEN_ANGLE;
+        let s = sqrt(max(1.0 - z * z, 0.0));
+        n = quat_rotate(rotation, vec3<f32>(s * cos(phi), s * sin(phi), z));
+        var walk_rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_PASS + 1u + w);
+        let settings = GateSettings(wp.s_star, terms, wp.clock, wp.rr_start);
+        accumulate_j_from(x, n, settings, 1u, &walk_rng, &per_walk);
+    }
+    var total = vec3<f32>(0.0);
+    for (var k = 1u; k <= terms; k++) {
+        total += per_walk[k];
+    }
+    var first = vec3<f32>(0.0);
+    if terms >= 1u {
+        first = per_walk[1];
+    }
+    let y = sh_basis(wp.sh_order, n);
+
+    // Quantities: F's coefficients, the multiply scattered part's, then the
+    // energies of k = 1..=N (k = 0 comes from the arrival below).
+    let quantities = 2u * count + terms;
+    for (var base = 0u; base < quantities; base += ROUND) {
+        for (var j = 0u; j < ROUND; j++) {
+            let q = base + j;
+            var v = vec3<f32>(0.0);
+            if q < count {
+                v = first * (y[q] * w_dir);
+            } else if q < 2u * count {
+                v = total * (y[q - count] * w_dir);
+            } else if q < quantities {
+                v = per_walk[q - 2u * count + 1u] * (volume * w_dir);
+            }
+            partial[lane * ROUND + j] = vec4<f32>(v, 0.0);
+        }
+        workgroupBarrier();
+        let q = base + lane;
+        if lane < ROUND && q < quantities {
+            var sum = vec3<f32>(0.0);
+            for (var l = 0u; l < WALK_LANES; l++) {
+                sum += partial[l * ROUND + lane].xyz;
+            }
+            var slot = record + q;
+            if q >= 2u * count {
+                slot = energy_at + 1u + (q - 2u * count);
+            }
+            walk_out[slot] += vec4<f32>(sum, 0.0);
+        }
+        workgroupBarrier();
+    }
+
+    // The light arriving from each external light, and E_0 = V ρ α σ_t Σ T E
+    // (∫ S₁ dn, the phase function being normalised), once per light.
+    if lane == 0u && wp.walk_offset == 0u {
+        var sum = vec3<f32>(0.0);
+        for (var l = 0u; l < n_ext; l++) {
+            let s = light_at(l, x);
+            var t = vec3<f32>(0.0);
+            for (var e = 0u; e < wp.tr_estimates; e++) {
+                t += transmittance(x, -s.travel, s.distance, &rng);
+            }
+            let arrival = s.irradiance * t / f32(wp.tr_estimates);
+            walk_out[record + 2u * count + l] = vec4<f32>(arrival, 0.0);
+            sum += arrival;
+        }
+        walk_out[energy_at] = vec4<f32>(volume * rho * scatter * sum, 0.0);
+    }
+}

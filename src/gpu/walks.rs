@@ -1,0 +1,419 @@
+//! The internal lights built on the GPU (METHOD.md §4–§5): placement of the
+//! `M` lights with density `p ∝ (1 − u) ρ̃/Z + u/|B|` and their weights
+//! `V_i = 1/(M p(x_i))`, then `K` time-gated walks per light estimating
+//! `J_N(x_i, ·)` with both clocks, projected onto real SH, with the per-term
+//! energies `E_k` and the light arriving from each external light. The same
+//! estimators as [`InternalLights::build`] (`physics::placement`,
+//! `physics::gated_walk`, `physics::internal`), with other random streams.
+//!
+//! - Placement: the placement grid (`ρ` at the cell corners) and an alias
+//!   table over its cells depend on the medium only and are built on the
+//!   CPU ([`PlacementDensity`]) and uploaded; the sampling runs on the GPU,
+//!   one invocation per light (`shaders/placement/main.wgsl`), deterministic
+//!   for a seed. Procedural and voxel media alike.
+//! - Walks: one workgroup of [`WALK_LANES`] invocations per light, one walk
+//!   per invocation and dispatch; `⌈K/64⌉` dispatches add their sums to
+//!   one output buffer (`shaders/walks/main.wgsl`). Splitting `K` over
+//!   dispatches keeps each invocation short: lavapipe caps an invocation's
+//!   loop iterations (see the README), and hardware drivers time out long
+//!   dispatches.
+//!
+//! Positions, weights, SH coefficients, arriving light and term energies
+//! are read back (a few MiB) and the CPU's [`InternalLights::assemble`]
+//! builds the kernel radius and the spatial indices.
+//!
+//! The scene's bindings 0–4 are those of [`SceneBuffers`] (shared with the
+//! renderers); this module's own buffers are at bindings 5–8.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use wgpu::util::DeviceExt;
+
+use super::context::{GpuContext, GpuError};
+use super::mirrors::{
+    GpuPassParams, GpuPlacementParams, GpuWalkParams, CLOCK_GEOMETRIC, CLOCK_OPTICAL_DEPTH,
+};
+use super::renderer::{compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
+use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
+use crate::physics::gated_walk::Clock;
+use crate::physics::internal::{
+    InternalLight, InternalLights, InternalParams, PLACEMENT_RESOLUTION,
+};
+use crate::physics::placement::PlacementDensity;
+use crate::physics::reference::RR_START_DEPTH;
+use crate::physics::sh::{sh_count, MAX_ORDER};
+use crate::render::Prepared;
+
+/// Invocations per workgroup of the walks, one walk each per dispatch;
+/// keep in sync with `WALK_LANES` in `shaders/walks/main.wgsl`.
+pub const WALK_LANES: u32 = 64;
+
+/// Invocations per workgroup of the placement; keep in sync with
+/// `@workgroup_size` in `shaders/placement/main.wgsl`.
+const PLACEMENT_LANES: u32 = 64;
+
+/// The largest series truncation `N` the GPU walks support: each
+/// invocation keeps its walk's `N + 1` terms in a private array (keep in
+/// sync with `GPU_MAX_GATES − 1` in `shaders/common/gated_walk.wgsl`).
+pub const GPU_MAX_TERMS: u32 = 256;
+
+/// One vec4 of a GPU buffer, read back.
+type Vec4 = [f32; 4];
+
+/// Most workgroups per dispatch along x (WebGPU's guaranteed limit).
+const MAX_GROUPS: u32 = 65_535;
+
+/// The lights as placed on the GPU, before the walks.
+#[derive(Clone, Debug)]
+pub struct GpuPlacement {
+    /// Positions, densities and weights `V_i`.
+    pub lights: Vec<InternalLight>,
+    /// The pdf `p(x_i)` of each light.
+    pub pdfs: Vec<f32>,
+    /// `∫ρ̃`, the placement's estimate of `∫ρ`.
+    pub density_integral: f32,
+}
+
+/// Buffers and pipelines of one build.
+struct Build {
+    ctx: GpuContext,
+    scene: SceneBuffers,
+    /// Two vec4 per light: (x, ρ(x)), (V, p, 0, 0).
+    placed: wgpu::Buffer,
+    light_count: u32,
+    density_integral: f32,
+}
+
+/// Places `params.lights` lights on the GPU for `prepared`'s medium with
+/// `params.uniform_mix` and `params.seed`, and reads them back (the first
+/// half of [`build_internal_lights_gpu`]; the tests check it against
+/// [`PlacementDensity`]).
+pub fn place_lights_gpu(
+    ctx: &GpuContext,
+    prepared: &Prepared,
+    params: &InternalParams,
+) -> Result<GpuPlacement, GpuError> {
+    let build = place(ctx, prepared, params)?;
+    let raw: Vec<[f32; 4]> = read_buffer(ctx, &build.placed, "the placed lights")?;
+    let (lights, pdfs) = unpack_placed(&raw, build.light_count as usize);
+    Ok(GpuPlacement {
+        lights,
+        pdfs,
+        density_integral: build.density_integral,
+    })
+}
+
+fn unpack_placed(raw: &[[f32; 4]], m: usize) -> (Vec<InternalLight>, Vec<f32>) {
+    raw.chunks_exact(2)
+        .take(m)
+        .map(|p| {
+            (
+                InternalLight {
+                    position: Vec3::new(p[0][0], p[0][1], p[0][2]),
+                    density: p[0][3],
+                    weight: p[1][0],
+                },
+                p[1][1],
+            )
+        })
+        .unzip()
+}
+
+/// Builds the internal lights of `prepared` with `params` on the GPU:
+/// placement and walks there, then [`InternalLights::assemble`] on the CPU.
+/// `timings.placement` covers the placement grid (CPU), its upload and the
+/// GPU sampling; `timings.walks` the walks and the read-back.
+pub fn build_internal_lights_gpu(
+    ctx: &GpuContext,
+    prepared: &Prepared,
+    params: &InternalParams,
+) -> Result<InternalLights, GpuError> {
+    if params.terms > GPU_MAX_TERMS {
+        return Err(GpuError::Unsupported {
+            what: "N (series truncation) of the GPU walks",
+            value: params.terms as u64,
+            max: GPU_MAX_TERMS as u64,
+        });
+    }
+    // Refuse before any work if the results cannot be bound.
+    let n_ext = prepared.lights.suns.len() + prepared.lights.points.len();
+    let stride = 2 * sh_count(params.sh_order.min(MAX_ORDER)) + n_ext + params.terms as usize + 1;
+    ctx.check_storage_size(
+        "internal-light walk results",
+        params.lights.max(1) as u64 * stride as u64 * 16,
+    )?;
+    let start = Instant::now();
+    let build = place(ctx, prepared, params)?;
+    ctx.wait_idle()?;
+    let t_place = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let (placed_raw, out) = walk(&build, prepared, params)?;
+    let t_walk = start.elapsed().as_secs_f64();
+
+    let m = build.light_count as usize;
+    let (lights, _) = unpack_placed(&placed_raw, m);
+    let count = sh_count(params.sh_order.min(MAX_ORDER));
+    let gates = params.terms as usize + 1;
+    let mut f_coeffs = Vec::with_capacity(m * count);
+    let mut multi_coeffs = Vec::with_capacity(m * count);
+    let mut arrival = Vec::with_capacity(m * n_ext);
+    let mut term_energy = vec![Vec3::ZERO; gates];
+    let v3 = |v: &[f32; 4]| Vec3::new(v[0], v[1], v[2]);
+    for record in out.chunks_exact(stride).take(m) {
+        f_coeffs.extend(record[..count].iter().map(v3));
+        multi_coeffs.extend(record[count..2 * count].iter().map(v3));
+        arrival.extend(record[2 * count..2 * count + n_ext].iter().map(v3));
+        for (e, v) in term_energy.iter_mut().zip(&record[2 * count + n_ext..]) {
+            *e += v3(v);
+        }
+    }
+    let mut lights_out = InternalLights::assemble(
+        &prepared.volume,
+        &prepared.lights,
+        params,
+        lights,
+        f_coeffs,
+        multi_coeffs,
+        arrival,
+        term_energy,
+        build.density_integral,
+    );
+    lights_out.timings.placement = t_place;
+    lights_out.timings.walks = t_walk;
+    Ok(lights_out)
+}
+
+/// A uniform buffer holding `value`.
+fn uniform<T: bytemuck::Pod>(ctx: &GpuContext, label: &str, value: &T) -> wgpu::Buffer {
+    ctx.device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: bytemuck::bytes_of(value),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        })
+}
+
+/// Runs `groups` workgroups of `pipeline` with `bind_group`.
+fn dispatch(
+    ctx: &GpuContext,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    bind_group: &wgpu::BindGroup,
+    groups: u32,
+) {
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.dispatch_workgroups(groups, 1, 1);
+    }
+    ctx.queue.submit([encoder.finish()]);
+}
+
+/// The bind group of `pipeline`: the scene's entries 0–4 and `extra`.
+fn bind_group(
+    ctx: &GpuContext,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    scene: &SceneBuffers,
+    extra: &[(u32, &wgpu::Buffer)],
+) -> wgpu::BindGroup {
+    let mut entries = scene.entries().to_vec();
+    for &(binding, buffer) in extra {
+        entries.push(wgpu::BindGroupEntry {
+            binding,
+            resource: buffer.as_entire_binding(),
+        });
+    }
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
+}
+
+/// Uploads the scene and the placement grid and enqueues the placement.
+fn place(
+    ctx: &GpuContext,
+    prepared: &Prepared,
+    params: &InternalParams,
+) -> Result<Build, GpuError> {
+    let vol = &prepared.volume;
+    let m = params.lights.max(1);
+    let light_count = u32::try_from(m)
+        .ok()
+        .filter(|&m| m.div_ceil(PLACEMENT_LANES) <= MAX_GROUPS)
+        .ok_or(GpuError::Unsupported {
+            what: "M (internal lights) of the GPU placement",
+            value: m as u64,
+            max: (MAX_GROUPS * PLACEMENT_LANES) as u64,
+        })?;
+    let density = PlacementDensity::build(
+        &vol.density,
+        vol.bounds,
+        PLACEMENT_RESOLUTION,
+        params.uniform_mix,
+    );
+    let (threshold, alias) = density.alias_table();
+    let mut table: Vec<[u32; 2]> = threshold
+        .iter()
+        .zip(&alias)
+        .map(|(t, a)| [t.to_bits(), *a])
+        .collect();
+    if table.is_empty() {
+        // Z = 0: the placement is uniform and never reads the table.
+        table.push([0; 2]);
+    }
+    let (lo, hi) = density.bounds();
+    let res = density.resolution();
+    let placement_params = GpuPlacementParams {
+        grid_min: lo.to_array(),
+        u_mix: density.u_mix(),
+        grid_max: hi.to_array(),
+        integral: density.density_integral(),
+        cell: density.cell_size().to_array(),
+        box_volume: density.box_volume(),
+        res: res.to_array(),
+        cell_count: res.x * res.y * res.z,
+        light_count,
+        inv_light_count: 1.0 / light_count as f32,
+        ..Default::default()
+    };
+    let placed_bytes = light_count as u64 * 32;
+    ctx.check_storage_size("placed internal lights", placed_bytes)?;
+    let pipeline = compute_pipeline(ctx, &PLACEMENT_MODULE)?;
+    let scene = SceneBuffers::new(ctx, prepared)?;
+    let alias_buf = storage_buffer(
+        ctx,
+        "placement alias table",
+        bytemuck::cast_slice(&table),
+        wgpu::BufferUsages::empty(),
+    )?;
+    let corners = storage_buffer(
+        ctx,
+        "placement grid corners",
+        bytemuck::cast_slice(density.corners()),
+        wgpu::BufferUsages::empty(),
+    )?;
+    let seed = GpuPassParams {
+        seed_lo: params.seed as u32,
+        seed_hi: (params.seed >> 32) as u32,
+        pass_index: 0,
+        sample_count: 0,
+    };
+    ctx.queue
+        .write_buffer(&scene.pass, 0, bytemuck::bytes_of(&seed));
+    let placed = ctx.scoped("placing the internal lights", || {
+        let params_buf = uniform(ctx, "placement uniform", &placement_params);
+        let placed = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("placed internal lights"),
+            size: placed_bytes,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let group = bind_group(
+            ctx,
+            "placement",
+            &pipeline,
+            &scene,
+            &[
+                (5, &params_buf),
+                (6, &alias_buf),
+                (7, &corners),
+                (8, &placed),
+            ],
+        );
+        dispatch(
+            ctx,
+            "placement",
+            &pipeline,
+            &group,
+            light_count.div_ceil(PLACEMENT_LANES),
+        );
+        placed
+    })?;
+    Ok(Build {
+        ctx: ctx.clone(),
+        scene,
+        placed,
+        light_count,
+        density_integral: density.density_integral(),
+    })
+}
+
+/// Runs the walks for the placed lights; returns the placed lights and the
+/// per-light records, read back.
+fn walk(
+    build: &Build,
+    prepared: &Prepared,
+    params: &InternalParams,
+) -> Result<(Vec<Vec4>, Vec<Vec4>), GpuError> {
+    let ctx = &build.ctx;
+    let order = params.sh_order.min(MAX_ORDER);
+    let count = sh_count(order) as u32;
+    let n_ext = (prepared.lights.suns.len() + prepared.lights.points.len()) as u32;
+    let stride = 2 * count + n_ext + params.terms + 1;
+    let walks = params.walks.max(1);
+    let out_bytes = build.light_count as u64 * stride as u64 * 16;
+    ctx.check_storage_size("internal-light walk results", out_bytes)?;
+    let pipeline = compute_pipeline(ctx, &WALKS_MODULE)?;
+    let mut walk_params = GpuWalkParams {
+        s_star: params.s_star,
+        n_terms: params.terms,
+        clock: match params.clock {
+            Clock::Geometric => CLOCK_GEOMETRIC,
+            Clock::OpticalDepth => CLOCK_OPTICAL_DEPTH,
+        },
+        rr_start: RR_START_DEPTH,
+        walks,
+        sh_order: order,
+        sh_count: count,
+        tr_estimates: (walks / 4).clamp(4, 64),
+        light_count: build.light_count,
+        light_offset: 0,
+        walk_offset: 0,
+        record_stride: stride,
+    };
+    let (params_buf, out, group) = ctx.scoped("setting up the internal-light walks", || {
+        let params_buf = uniform(ctx, "walk uniform", &walk_params);
+        let out = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("internal-light walk results"),
+            size: out_bytes.max(16),
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let group = bind_group(
+            ctx,
+            "walks",
+            &pipeline,
+            &build.scene,
+            &[(5, &params_buf), (6, &build.placed), (7, &out)],
+        );
+        (params_buf, out, group)
+    })?;
+    // One dispatch per block of 64 walks and of at most MAX_GROUPS lights;
+    // each adds its sums to `out` (zeroed at creation).
+    ctx.scoped("running the internal-light walks", || {
+        for walk_offset in (0..walks).step_by(WALK_LANES as usize) {
+            for light_offset in (0..build.light_count).step_by(MAX_GROUPS as usize) {
+                walk_params.walk_offset = walk_offset;
+                walk_params.light_offset = light_offset;
+                ctx.queue
+                    .write_buffer(&params_buf, 0, bytemuck::bytes_of(&walk_params));
+                let groups = (build.light_count - light_offset).min(MAX_GROUPS);
+                dispatch(ctx, "walks", &pipeline, &group, groups);
+            }
+        }
+    })?;
+    let placed = read_buffer(ctx, &build.placed, "the placed lights")?;
+    let records = read_buffer(ctx, &out, "the internal-light walk results")?;
+    Ok((placed, records))
+}
