@@ -10,11 +10,14 @@
 //! - [`gather`]: the internal-lights final gather (METHOD.md §6) with the
 //!   lights built on the CPU and uploaded with their SH coefficients and
 //!   spatial indices.
+//! - [`display`]: the previewer's display pass (accumulation to an 8-bit
+//!   sRGB texture, on the device) and its statistics.
 //!
 //! Still on the CPU only: placing the internal lights and their time-gated
 //! walks (METHOD.md §4–§5).
 
 pub mod context;
+pub mod display;
 pub mod gather;
 pub mod mirrors;
 pub mod renderer;

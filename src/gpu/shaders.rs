@@ -69,6 +69,16 @@ pub const GATHER: ShaderPart = part!("common/gather.wgsl");
 /// method).
 pub const GATHER_MAIN: ShaderPart = part!("gather/main.wgsl");
 
+/// Display transforms (`render/tonemap.rs`).
+pub const TONEMAP: ShaderPart = part!("common/tonemap.wgsl");
+/// The previewer's display pass: parameters, bindings, heatmap ramp
+/// (`gpu/display.rs`, `ui/viewport.rs`).
+pub const DISPLAY_MAIN: ShaderPart = part!("display/main.wgsl");
+/// The display pass's image entry point.
+pub const DISPLAY_IMAGE: ShaderPart = part!("display/image.wgsl");
+/// The display pass's statistics (reduction) entry point.
+pub const DISPLAY_STATS: ShaderPart = part!("display/stats.wgsl");
+
 /// A shader module: a name and its parts in dependency order.
 #[derive(Clone, Copy, Debug)]
 pub struct ModuleSource {
@@ -127,8 +137,27 @@ pub const GATHER_MODULE: ModuleSource = ModuleSource {
     entry_point: "gather_pass",
 };
 
+/// The previewer's display pass: accumulation buffers to the shown image.
+pub const DISPLAY_MODULE: ModuleSource = ModuleSource {
+    name: "display",
+    parts: &[ACCUMULATE, TONEMAP, DISPLAY_MAIN, DISPLAY_IMAGE],
+    entry_point: "display_image",
+};
+
+/// The previewer's statistics: accumulation buffers to four means.
+pub const DISPLAY_STATS_MODULE: ModuleSource = ModuleSource {
+    name: "display statistics",
+    parts: &[ACCUMULATE, DISPLAY_MAIN, DISPLAY_STATS],
+    entry_point: "display_stats",
+};
+
 /// Every module the backend builds (the tests validate each).
-pub const MODULES: &[ModuleSource] = &[REFERENCE_MODULE, GATHER_MODULE];
+pub const MODULES: &[ModuleSource] = &[
+    REFERENCE_MODULE,
+    GATHER_MODULE,
+    DISPLAY_MODULE,
+    DISPLAY_STATS_MODULE,
+];
 
 impl ModuleSource {
     /// The module's WGSL text: its parts concatenated, each preceded by a
