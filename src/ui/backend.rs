@@ -732,6 +732,7 @@ impl JobContext<'_> {
         let film = || Film::new(width, height);
         let mut films: Vec<[Film; 3]> = engines.iter().map(|_| [film(), film(), film()]).collect();
         for pass in 0..job.max_spp {
+            let pass_start = Instant::now();
             for ((estimator, engine), film) in engines.iter().zip(films.iter_mut()) {
                 let start = Instant::now();
                 let Some(image) = engine.pass(pass, self.cancel) else {
@@ -744,6 +745,7 @@ impl JobContext<'_> {
                 film[1].add_pass(&image.single);
                 film[2].add_pass(&image.internal);
             }
+            trace("CPU pass", pass_start);
             let streams = engines
                 .iter()
                 .zip(&films)
@@ -799,6 +801,7 @@ impl JobContext<'_> {
                 engine.add_pass(pass);
             }
             gpu.ctx.wait_idle()?;
+            trace("GPU pass", start);
             let secs = start.elapsed().as_secs_f64() / engines.len().max(1) as f64;
             for (e, _) in &engines {
                 self.secs_per_sample[Backend::Gpu as usize][*e as usize] =
