@@ -355,3 +355,49 @@ fn an_example_scene_opens_clean_and_follows_its_method() {
     assert_eq!(app.session.compare, expected);
     wait_for_image(&mut h);
 }
+
+/// Without a display device (as here) choosing the GPU backend keeps the
+/// CPU rendering and says why, in a notification and in the panel;
+/// choosing the CPU again removes the warning.
+#[test]
+fn choosing_the_gpu_without_one_falls_back_to_the_cpu_with_a_notice() {
+    use lantern::ui::backend::Backend;
+    let mut h = harness();
+    h.run_steps(2);
+    assert_eq!(h.state().session.backend, Backend::Cpu);
+    assert!(h.state().toasts.is_empty());
+    h.get_by_label(controls::BACKEND_GPU).click();
+    h.run_steps(2);
+    assert_eq!(h.state().session.backend, Backend::Gpu);
+    assert_eq!(
+        h.state().job().backend,
+        Backend::Cpu,
+        "no GPU: the job runs on the CPU"
+    );
+    let toast = h
+        .state()
+        .toasts
+        .iter()
+        .find(|t| t.error)
+        .expect("a fallback notification");
+    assert!(
+        toast.text.contains("GPU backend unavailable")
+            && toast.text.contains("rendering on the CPU"),
+        "{}",
+        toast.text
+    );
+    assert!(h
+        .query_by_label_contains("GPU unavailable (no window")
+        .is_some());
+    wait_for_image(&mut h);
+    assert_eq!(h.state().active_backend(), Backend::Cpu);
+    // Once per choice: more frames add no more notices.
+    h.run_steps(3);
+    assert_eq!(h.state().toasts.iter().filter(|t| t.error).count(), 1);
+
+    h.get_by_label(controls::BACKEND_CPU).click();
+    h.run_steps(2);
+    assert_eq!(h.state().session.backend, Backend::Cpu);
+    assert!(h.query_by_label_contains("GPU unavailable").is_none());
+    assert!(h.query_by_label("rendering on the CPU").is_some());
+}

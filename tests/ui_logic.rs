@@ -17,6 +17,7 @@ fn stream(estimator: Estimator, value: Vec3, n: usize) -> StreamImage {
         rel_error: 0.1,
         single: None,
         internal: None,
+        gpu: None,
     }
 }
 

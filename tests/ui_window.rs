@@ -1,8 +1,11 @@
 //! The real previewer window (eframe + wgpu) under a display server: it
 //! opens the example cloud, renders a few passes, saves a screenshot of
 //! itself and quits; the screenshot must show the side panel and a rendered
-//! cloud in the split view (internal lights | reference). The same command
-//! makes the README's screenshot:
+//! cloud in the split view (internal lights | reference), rendered on the
+//! GPU backend (the window's wgpu device: Mesa's lavapipe under Xvfb). A
+//! second run with the GPU forced off (`LANTERN_GPU=off`) must render on
+//! the CPU and show the fallback notice. The same command makes the
+//! README's screenshot:
 //!
 //! ```text
 //! LANTERN_KEEP_SCREENSHOT=assets/previewer.png \
@@ -55,6 +58,12 @@ fn the_window_renders_and_screenshots_itself() {
         output.status
     );
     assert!(stdout.contains("screenshot at"), "{stdout}\n{stderr}");
+    // The window has a wgpu device, so the GPU backend renders (the app
+    // prints the panel's backend line once the first full image is shown).
+    assert!(
+        stdout.contains("lantern: rendering on the GPU"),
+        "the GPU backend is not active:\n{stdout}\n{stderr}"
+    );
 
     let image = image::open(&shot).expect("read screenshot").to_rgb8();
     let (w, h) = image.dimensions();
@@ -91,4 +100,66 @@ fn the_window_renders_and_screenshots_itself() {
     if let Ok(keep) = std::env::var("LANTERN_KEEP_SCREENSHOT") {
         std::fs::copy(&shot, keep).expect("copy screenshot");
     }
+}
+
+#[test]
+fn with_the_gpu_forced_off_the_cpu_renders_and_a_notice_says_so() {
+    let required = std::env::var("LANTERN_REQUIRE_DISPLAY").is_ok_and(|v| v == "1");
+    if !display_available() {
+        assert!(
+            !required,
+            "LANTERN_REQUIRE_DISPLAY=1 but there is no DISPLAY (run under xvfb-run)"
+        );
+        println!("notice: no display; the previewer window test is skipped");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let shot = dir.path().join("fallback.png");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes/thin_sphere.ron");
+    let output = Command::new(env!("CARGO_BIN_EXE_lantern"))
+        .arg("view")
+        .arg(&scene)
+        .env("LANTERN_GPU", "off")
+        .env("LANTERN_SCREENSHOT", &shot)
+        .env("LANTERN_SCRIPT_SPP", "1")
+        .env("LANTERN_RENDER_SIZE", "160x120")
+        .env("LANTERN_SCRIPT_TIMEOUT_SECS", "240")
+        .env("XDG_DATA_HOME", dir.path())
+        .output()
+        .expect("run the previewer");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        output.status.success(),
+        "previewer failed ({}):\n{stdout}\n{stderr}",
+        output.status
+    );
+    // The notification (a toast; notify_error also logs it) and the panel's
+    // backend line.
+    assert!(
+        stderr.contains(
+            "GPU backend unavailable (disabled by LANTERN_GPU=off); rendering on the CPU"
+        ),
+        "no fallback notice:\n{stdout}\n{stderr}"
+    );
+    assert!(
+        stdout.contains(
+            "lantern: GPU unavailable (disabled by LANTERN_GPU=off): rendering on the CPU"
+        ),
+        "the CPU backend is not active:\n{stdout}\n{stderr}"
+    );
+    // The toast is on screen: its dark red fill in the lower right corner.
+    let image = image::open(&shot).expect("read screenshot").to_rgb8();
+    let (w, h) = image.dimensions();
+    let red = (w * 2 / 3..w)
+        .flat_map(|x| (h * 2 / 3..h).map(move |y| (x, y)))
+        .filter(|&(x, y)| {
+            let p = image.get_pixel(x, y);
+            p[0] > 100 && p[0] < 140 && p[1] < 45 && p[2] < 45
+        })
+        .count();
+    assert!(
+        red > 500,
+        "no red notice in the lower right corner ({red} pixels)"
+    );
 }

@@ -88,7 +88,14 @@ pub struct GpuContext {
     /// Errors wgpu reported outside an error scope, oldest first; checked
     /// by [`GpuContext::take_error`] instead of wgpu's default panic.
     uncaptured: Arc<Mutex<Vec<String>>>,
+    /// Compute pipelines already built on this device, by module name and
+    /// entry point (the previewer builds renderers on every edit; building
+    /// a pipeline is far slower than a pass on a software rasteriser).
+    pipelines: Arc<Mutex<Vec<PipelineEntry>>>,
 }
+
+/// One cached pipeline: (module name, entry point) and the pipeline.
+type PipelineEntry = ((&'static str, &'static str), wgpu::ComputePipeline);
 
 impl GpuContext {
     /// Creates a device on the first suitable adapter, without a window.
@@ -125,6 +132,42 @@ impl GpuContext {
                 adapter: adapter_info.name.clone(),
                 source,
             })?;
+        Ok(Self::wrap(device, queue, adapter_info, limits))
+    }
+
+    /// A context on a device that someone else created, e.g. eframe's (so
+    /// that renders and the window share one device and images need no
+    /// copy). Fails with [`GpuError::NoAdapter`] where the adapter cannot
+    /// run compute shaders (a GL ES fallback, say). From then on wgpu's
+    /// errors outside an error scope on this device are collected for
+    /// [`GpuContext::take_error`] instead of panicking, for every user of
+    /// the device.
+    pub fn from_device(
+        adapter: &wgpu::Adapter,
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+    ) -> Result<Self, GpuError> {
+        let adapter_info = adapter.get_info();
+        let downlevel = adapter.get_downlevel_capabilities();
+        if !downlevel
+            .flags
+            .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+        {
+            return Err(GpuError::NoAdapter(format!(
+                "{} ({:?}) cannot run compute shaders",
+                adapter_info.name, adapter_info.backend
+            )));
+        }
+        let limits = device.limits();
+        Ok(Self::wrap(device, queue, adapter_info, limits))
+    }
+
+    fn wrap(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        adapter_info: wgpu::AdapterInfo,
+        limits: wgpu::Limits,
+    ) -> Self {
         let uncaptured = Arc::new(Mutex::new(Vec::new()));
         let sink = uncaptured.clone();
         device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
@@ -132,13 +175,39 @@ impl GpuContext {
                 v.push(e.to_string());
             }
         }));
-        Ok(Self {
+        Self {
             device,
             queue,
             adapter_info,
             limits,
             uncaptured,
-        })
+            pipelines: Arc::new(Mutex::new(Vec::new())),
+        }
+    }
+
+    /// The pipeline built earlier for (`module`, `entry_point`), if any.
+    pub fn cached_pipeline(
+        &self,
+        module: &'static str,
+        entry_point: &'static str,
+    ) -> Option<wgpu::ComputePipeline> {
+        let cache = self.pipelines.lock().ok()?;
+        cache
+            .iter()
+            .find(|(key, _)| *key == (module, entry_point))
+            .map(|(_, p)| p.clone())
+    }
+
+    /// Keeps `pipeline` for later [`GpuContext::cached_pipeline`] calls.
+    pub fn cache_pipeline(
+        &self,
+        module: &'static str,
+        entry_point: &'static str,
+        pipeline: &wgpu::ComputePipeline,
+    ) {
+        if let Ok(mut cache) = self.pipelines.lock() {
+            cache.push(((module, entry_point), pipeline.clone()));
+        }
     }
 
     /// One line describing the adapter, e.g. "llvmpipe (LLVM 15.0.6, 256

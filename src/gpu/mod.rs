@@ -13,8 +13,11 @@
 //! - [`walks`]: the internal lights built on the GPU (METHOD.md §4–§5):
 //!   placement, time-gated walks and SH projection, finished by the CPU's
 //!   spatial indices.
+//! - [`display`]: the previewer's display pass (accumulation to an 8-bit
+//!   sRGB texture, on the device) and its statistics.
 
 pub mod context;
+pub mod display;
 pub mod gather;
 pub mod mirrors;
 pub mod renderer;

@@ -29,8 +29,11 @@ pub(crate) fn compute_pipeline(
     ctx: &GpuContext,
     module: &ModuleSource,
 ) -> Result<wgpu::ComputePipeline, GpuError> {
+    if let Some(p) = ctx.cached_pipeline(module.name, module.entry_point) {
+        return Ok(p);
+    }
     let source = module.assemble();
-    ctx.scoped(&format!("building the {} shader", module.name), || {
+    let pipeline = ctx.scoped(&format!("building the {} shader", module.name), || {
         let shader = ctx
             .device
             .create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -46,7 +49,9 @@ pub(crate) fn compute_pipeline(
                 compilation_options: Default::default(),
                 cache: None,
             })
-    })
+    })?;
+    ctx.cache_pipeline(module.name, module.entry_point, &pipeline);
+    Ok(pipeline)
 }
 
 /// A storage buffer holding `data`, after checking that the device can bind
@@ -374,6 +379,12 @@ impl GpuRenderer {
     /// Image size in pixels.
     pub fn size(&self) -> (u32, u32) {
         (self.width, self.height)
+    }
+
+    /// The per-pixel accumulation ([`GpuAccum`] per pixel, rows top to
+    /// bottom), for a display pass that reads it where it is.
+    pub fn accum_buffer(&self) -> &wgpu::Buffer {
+        &self.accum
     }
 
     /// Bytes this renderer holds in GPU memory (scene, majorants, lights,

@@ -77,6 +77,15 @@ pub const PLACEMENT_MAIN: ShaderPart = part!("placement/main.wgsl");
 /// The walks' entry point (`physics/internal.rs`, the walk loop of
 /// `InternalLights::build_at`).
 pub const WALKS_MAIN: ShaderPart = part!("walks/main.wgsl");
+/// Display transforms (`render/tonemap.rs`).
+pub const TONEMAP: ShaderPart = part!("common/tonemap.wgsl");
+/// The previewer's display pass: parameters, bindings, heatmap ramp
+/// (`gpu/display.rs`, `ui/viewport.rs`).
+pub const DISPLAY_MAIN: ShaderPart = part!("display/main.wgsl");
+/// The display pass's image entry point.
+pub const DISPLAY_IMAGE: ShaderPart = part!("display/image.wgsl");
+/// The display pass's statistics (reduction) entry point.
+pub const DISPLAY_STATS: ShaderPart = part!("display/stats.wgsl");
 
 /// A shader module: a name and its parts in dependency order.
 #[derive(Clone, Copy, Debug)]
@@ -154,12 +163,28 @@ pub const WALKS_MODULE: ModuleSource = ModuleSource {
     entry_point: "walk_lights",
 };
 
+/// The previewer's display pass: accumulation buffers to the shown image.
+pub const DISPLAY_MODULE: ModuleSource = ModuleSource {
+    name: "display",
+    parts: &[ACCUMULATE, TONEMAP, DISPLAY_MAIN, DISPLAY_IMAGE],
+    entry_point: "display_image",
+};
+
+/// The previewer's statistics: accumulation buffers to four means.
+pub const DISPLAY_STATS_MODULE: ModuleSource = ModuleSource {
+    name: "display statistics",
+    parts: &[ACCUMULATE, DISPLAY_MAIN, DISPLAY_STATS],
+    entry_point: "display_stats",
+};
+
 /// Every module the backend builds (the tests validate each).
 pub const MODULES: &[ModuleSource] = &[
     REFERENCE_MODULE,
     GATHER_MODULE,
     PLACEMENT_MODULE,
     WALKS_MODULE,
+    DISPLAY_MODULE,
+    DISPLAY_STATS_MODULE,
 ];
 
 impl ModuleSource {

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use eframe::egui;
 use serde::{Deserialize, Serialize};
 
-use super::backend::{Estimator, Job, Worker};
+use super::backend::{Backend, Estimator, Job, Worker};
 use super::files::{self, Loaded};
 use super::viewport::{Display, NavState};
 use super::LaunchOptions;
@@ -111,6 +111,9 @@ pub struct Session {
     pub show_sun: bool,
     /// EXR export adds the single-scatter and internal-light layers.
     pub export_layers: bool,
+    /// Where to render: the GPU where one is available (the default),
+    /// else the CPU.
+    pub backend: Backend,
 }
 
 impl Default for Session {
@@ -132,6 +135,7 @@ impl Default for Session {
             show_box: true,
             show_sun: true,
             export_layers: true,
+            backend: Backend::Gpu,
         }
     }
 }
@@ -199,6 +203,15 @@ impl Script {
             }),
         })
     }
+}
+
+/// Whether the GPU backend can be used in this run.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum GpuStatus {
+    /// A device shared with the window: its adapter's description.
+    Ready(String),
+    /// Why there is none (the CPU renders instead).
+    Unavailable(String),
 }
 
 /// A message shown for a few seconds in the corner of the viewport.
@@ -296,6 +309,7 @@ struct ScriptState {
     frames: Vec<Instant>,
     ui_ms: Vec<f64>,
     cpu_ms: Vec<f64>,
+    backend_reported: bool,
 }
 
 /// The previewer application.
@@ -322,6 +336,11 @@ pub struct LanternApp {
     pub nav: NavState,
     /// Notifications.
     pub toasts: Vec<Toast>,
+    /// Whether the GPU backend is available.
+    pub gpu: GpuStatus,
+    /// Whether the user was told that the GPU is unavailable since they
+    /// last chose it.
+    pub gpu_notice_shown: bool,
     /// A scene being loaded in the background.
     pending_load: Option<Receiver<Result<Loaded, String>>>,
     /// The viewport's render size in pixels (after the resolution scale).
@@ -357,14 +376,29 @@ impl LanternApp {
                 .unwrap_or_default()
         };
         let ctx = cc.egui_ctx.clone();
-        let worker = Worker::start(Box::new(move |within| {
-            if within.is_zero() {
-                ctx.request_repaint();
-            } else {
-                ctx.request_repaint_after(within);
-            }
-        }));
+        let (gpu, gpu_view) = super::gpu_view::from_eframe(cc);
+        let worker = Worker::start_with_gpu(
+            Box::new(move |within| {
+                if within.is_zero() {
+                    ctx.request_repaint();
+                } else {
+                    ctx.request_repaint_after(within);
+                }
+            }),
+            gpu.as_ref().ok().cloned(),
+        );
         let mut app = Self::with_worker(session, worker);
+        app.gpu = match &gpu {
+            Ok(ctx) => GpuStatus::Ready(ctx.describe()),
+            Err(reason) => GpuStatus::Unavailable(reason.clone()),
+        };
+        app.display.set_gpu_view(gpu_view);
+        // Scripted runs and the latency measurement pick the backend.
+        match std::env::var("LANTERN_BACKEND").as_deref() {
+            Ok("cpu") => app.session.backend = Backend::Cpu,
+            Ok("gpu") => app.session.backend = Backend::Gpu,
+            _ => {}
+        }
         app.forced_render_size = options.script.as_ref().and_then(|s| s.render_size);
         app.script = options.script;
         let wanted = options.scene.or_else(|| app.session.last_scene.clone());
@@ -377,9 +411,17 @@ impl LanternApp {
         app
     }
 
-    /// An application with the default scene and no window (tests).
+    /// An application with the default scene and no window (tests): no
+    /// display device, so the CPU backend (choosing the GPU shows the
+    /// fallback notice).
     pub fn headless() -> Self {
-        Self::with_worker(Session::default(), Worker::start(Box::new(|_| {})))
+        let session = Session {
+            backend: Backend::Cpu,
+            ..Session::default()
+        };
+        let mut app = Self::with_worker(session, Worker::start(Box::new(|_| {})));
+        app.gpu = GpuStatus::Unavailable("no window: the previewer runs without a display".into());
+        app
     }
 
     fn with_worker(session: Session, worker: Worker) -> Self {
@@ -398,6 +440,8 @@ impl LanternApp {
             display: Display::default(),
             nav: NavState::default(),
             toasts: Vec::new(),
+            gpu: GpuStatus::Unavailable("not set up".into()),
+            gpu_notice_shown: false,
             pending_load: None,
             render_size: [256, 256],
             forced_render_size: None,
@@ -529,6 +573,57 @@ impl LanternApp {
             scene_dir: self.scene_dir.clone(),
             estimators,
             max_spp: self.session.max_spp.max(1),
+            backend: self.requested_backend(),
+        }
+    }
+
+    /// The backend the next job asks for: the chosen one, if available.
+    pub fn requested_backend(&self) -> Backend {
+        match (&self.session.backend, &self.gpu) {
+            (Backend::Gpu, GpuStatus::Ready(_)) => Backend::Gpu,
+            _ => Backend::Cpu,
+        }
+    }
+
+    /// The backend that rendered the image on screen (the requested one
+    /// before the first image).
+    pub fn active_backend(&self) -> Backend {
+        self.display
+            .snapshot()
+            .map_or_else(|| self.requested_backend(), |s| s.backend)
+    }
+
+    /// One line saying where the image is rendered and, where that is not
+    /// the chosen backend, why.
+    pub fn backend_status(&self) -> String {
+        let active = self.active_backend();
+        match (&self.gpu, active) {
+            (GpuStatus::Ready(adapter), Backend::Gpu) => {
+                format!("rendering on the GPU: {adapter}")
+            }
+            (GpuStatus::Unavailable(reason), _) if self.session.backend == Backend::Gpu => {
+                format!("GPU unavailable ({reason}): rendering on the CPU")
+            }
+            (_, Backend::Cpu) if self.session.backend == Backend::Gpu => {
+                "the GPU could not take this scene: rendering on the CPU".to_string()
+            }
+            _ => "rendering on the CPU".to_string(),
+        }
+    }
+
+    /// Tells once (per choice of the GPU) that the GPU is unavailable.
+    fn gpu_notice(&mut self) {
+        if self.session.backend != Backend::Gpu {
+            self.gpu_notice_shown = false;
+            return;
+        }
+        if self.gpu_notice_shown {
+            return;
+        }
+        if let GpuStatus::Unavailable(reason) = &self.gpu {
+            let text = format!("GPU backend unavailable ({reason}); rendering on the CPU");
+            self.gpu_notice_shown = true;
+            self.notify_error(text);
         }
     }
 
@@ -559,6 +654,7 @@ impl LanternApp {
         for e in self.worker.take_errors() {
             self.notify_error(e);
         }
+        self.gpu_notice();
         self.poll_load();
         self.handle_dropped_files(&ctx);
         self.shortcuts(&ctx);
@@ -761,6 +857,7 @@ impl LanternApp {
         };
         let generation = self.generation();
         let current = self.display.generation() == generation && generation > 0;
+        let status = self.backend_status();
         let state = &mut self.script_state;
         let started = *state.started.get_or_insert_with(Instant::now);
         // Poll gently: a software rasterizer (CI) shares the CPU with the
@@ -771,6 +868,10 @@ impl LanternApp {
             std::process::exit(3);
         }
         let spp = self.display.spp();
+        if !state.backend_reported && current && spp >= 1 {
+            state.backend_reported = true;
+            println!("lantern: {status}");
+        }
 
         if script.fps_secs > 0.0 {
             if state.frames.is_empty() {

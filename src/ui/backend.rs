@@ -13,6 +13,18 @@
 //!
 //! Nothing here knows of egui: the worker wakes the UI through a plain
 //! callback.
+//!
+//! Two backends ([`Backend`]): on the CPU the worker accumulates
+//! [`Film`]s and publishes their means; on the GPU it drives
+//! [`GpuRenderer`]s, whose accumulation stays on the device: a snapshot
+//! then carries the accumulation buffers ([`GpuStream`]) for the UI's
+//! display pass, and the noise figure and RMSE come from a small
+//! reduction on the GPU read back here, on the worker thread (16 bytes per
+//! stream and pass). The internal lights are built on the CPU for both
+//! backends, and the per-pixel light shares (gizmo hover) always come from
+//! a CPU renderer. Where the GPU cannot take a job (a scene too large for
+//! the device, a device error) the worker reports it and renders that job
+//! on the CPU.
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -24,6 +36,8 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 
 use crate::cpu::Renderer;
+use crate::gpu::display::{read_accum, DisplayPass, ImageStats};
+use crate::gpu::{GpuContext, GpuError, GpuRenderer};
 use crate::physics::gated_walk::Clock;
 use crate::physics::internal::InternalLights;
 use crate::render::{Film, Prepared};
@@ -40,6 +54,26 @@ pub enum Estimator {
     Reference = 1,
 }
 
+/// Where the passes run.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Backend {
+    /// wgpu compute shaders, on the device the window uses.
+    #[default]
+    Gpu,
+    /// The CPU renderers (rayon).
+    Cpu,
+}
+
+impl Backend {
+    /// "GPU" or "CPU".
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Gpu => "GPU",
+            Backend::Cpu => "CPU",
+        }
+    }
+}
+
 /// Everything that determines the picture.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Job {
@@ -52,6 +86,8 @@ pub struct Job {
     pub estimators: Vec<Estimator>,
     /// Stop after this many samples per pixel.
     pub max_spp: u32,
+    /// Where to render (the GPU only where the worker has a device).
+    pub backend: Backend,
 }
 
 /// The internal lights as the gizmos need them.
@@ -165,6 +201,54 @@ pub struct StreamImage {
     pub single: Option<Vec<Vec3>>,
     /// Internal-light layer, when the estimator splits it out.
     pub internal: Option<Vec<Vec3>>,
+    /// On the GPU backend: the accumulation on the device (`mean` and the
+    /// layers are then empty; see [`StreamImage::resolved`]).
+    pub gpu: Option<GpuStream>,
+}
+
+/// A stream's accumulation on the GPU.
+#[derive(Clone, Debug)]
+pub struct GpuStream {
+    /// The device.
+    pub ctx: GpuContext,
+    /// [`GpuAccum`](crate::gpu::mirrors::GpuAccum) per pixel, rows top to
+    /// bottom.
+    pub accum: wgpu::Buffer,
+}
+
+impl StreamImage {
+    /// The image with its means on the CPU: itself on the CPU backend, a
+    /// read-back of the accumulation on the GPU backend (waits for the GPU:
+    /// export and tests only).
+    pub fn resolved(&self) -> Result<std::borrow::Cow<'_, StreamImage>, String> {
+        let Some(gpu) = &self.gpu else {
+            return Ok(std::borrow::Cow::Borrowed(self));
+        };
+        let image = read_accum(&gpu.ctx, &gpu.accum, self.width, self.height, self.spp)
+            .map_err(|e| format!("{e:#}"))?;
+        let film = image.film();
+        let mean = film.mean();
+        let single = image.single_mean();
+        let internal = mean.iter().zip(&single).map(|(t, s)| *t - *s).collect();
+        Ok(std::borrow::Cow::Owned(StreamImage {
+            mean,
+            single: Some(single),
+            internal: Some(internal),
+            gpu: None,
+            ..self.clone()
+        }))
+    }
+
+    /// Variance of each pixel's mean (empty on the CPU backend, where
+    /// [`StreamImage`] keeps only means; read back on the GPU backend).
+    pub fn gpu_variance_of_mean(&self) -> Result<Vec<Vec3>, String> {
+        let Some(gpu) = &self.gpu else {
+            return Ok(Vec::new());
+        };
+        let image = read_accum(&gpu.ctx, &gpu.accum, self.width, self.height, self.spp)
+            .map_err(|e| format!("{e:#}"))?;
+        Ok(image.film().variance_of_mean())
+    }
 }
 
 /// What the worker last produced for a job.
@@ -183,6 +267,12 @@ pub struct Snapshot {
     pub done: bool,
     /// The medium's world box.
     pub bounds: Option<(Vec3, Vec3)>,
+    /// Where the images were rendered.
+    pub backend: Backend,
+    /// On the GPU backend with both estimators: the RMSE of internal
+    /// lights against the reference and the reference's mean (from the
+    /// statistics pass; the CPU backend's UI computes them from the means).
+    pub error_stats: Option<(f32, f32)>,
 }
 
 /// State shared between the UI and the worker.
@@ -222,9 +312,15 @@ pub struct Worker {
 }
 
 impl Worker {
-    /// Starts the worker; `wake` is called (from the worker thread) after
-    /// every new snapshot or error.
+    /// Starts a worker with the CPU backend only; `wake` is called (from
+    /// the worker thread) after every new snapshot or error.
     pub fn start(wake: Waker) -> Self {
+        Self::start_with_gpu(wake, None)
+    }
+
+    /// Starts the worker; jobs asking for [`Backend::Gpu`] run on `gpu`
+    /// (on the CPU where it is `None`).
+    pub fn start_with_gpu(wake: Waker, gpu: Option<GpuContext>) -> Self {
         let (tx, rx) = mpsc::channel();
         let shared = Arc::new(Shared {
             latest: Mutex::new(None),
@@ -236,7 +332,7 @@ impl Worker {
             .name("lantern-render".into())
             .spawn(move || {
                 super::lower_thread_priority();
-                worker_loop(rx, worker_shared)
+                worker_loop(rx, worker_shared, gpu)
             })
             .ok();
         if thread.is_none() {
@@ -375,15 +471,38 @@ fn settings_for(job: &Job, estimator: Estimator) -> crate::scene::RenderSettings
 /// Target duration of the low-resolution first pass.
 const PREVIEW_BUDGET: Duration = Duration::from_millis(20);
 
-fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>) {
+/// The worker's GPU: the device and the statistics pass.
+struct GpuWorker {
+    ctx: GpuContext,
+    stats: DisplayPass,
+    /// The density (and folder) of the last job the GPU could not take:
+    /// later jobs on it go to the CPU without a new notice.
+    failed_for: Option<(DensitySource, PathBuf)>,
+}
+
+fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>, gpu: Option<GpuContext>) {
     let mut cache = DensityCache {
         key: None,
         density: None,
     };
     let mut lights_cache = LightsCache::default();
-    // Seconds per full-resolution pixel-sample, measured per estimator;
-    // guides the preview's downscale factor.
-    let mut secs_per_sample = [2e-6f64; 2];
+    let mut gpu = gpu.and_then(|ctx| match DisplayPass::new(&ctx) {
+        Ok(stats) => Some(GpuWorker {
+            ctx,
+            stats,
+            failed_for: None,
+        }),
+        Err(e) => {
+            push_error(
+                &shared,
+                format!("GPU backend unavailable ({e}); rendering on the CPU"),
+            );
+            None
+        }
+    });
+    // Seconds per full-resolution pixel-sample, measured per backend and
+    // estimator; guides the preview's downscale factor.
+    let mut secs_per_sample = [[2e-6f64; 2]; 2];
     let mut next: Option<Command> = None;
     loop {
         let command = match next.take() {
@@ -417,7 +536,14 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>) {
             rx: &rx,
             shared: &shared,
             secs_per_sample: &mut secs_per_sample,
+            gpu: None,
         };
+        let density_key = (job.scene.medium.density.clone(), job.scene_dir.clone());
+        if job.backend == Backend::Gpu {
+            ctx.gpu = gpu
+                .as_mut()
+                .filter(|g| g.failed_for.as_ref() != Some(&density_key));
+        }
         next = ctx.run(&mut cache, &mut lights_cache);
     }
 }
@@ -429,7 +555,9 @@ struct JobContext<'a> {
     cancel: &'a AtomicBool,
     rx: &'a Receiver<Command>,
     shared: &'a Shared,
-    secs_per_sample: &'a mut [f64; 2],
+    secs_per_sample: &'a mut [[f64; 2]; 2],
+    /// The GPU, when this job runs there.
+    gpu: Option<&'a mut GpuWorker>,
 }
 
 impl JobContext<'_> {
@@ -443,6 +571,15 @@ impl JobContext<'_> {
         self.rx.try_recv().ok()
     }
 
+    /// The backend this job renders on.
+    fn backend(&self) -> Backend {
+        if self.gpu.is_some() {
+            Backend::Gpu
+        } else {
+            Backend::Cpu
+        }
+    }
+
     fn publish(&self, streams: Vec<StreamImage>, extra: SnapshotExtra) {
         publish(
             self.shared,
@@ -453,7 +590,22 @@ impl JobContext<'_> {
                 shares: extra.shares,
                 done: extra.done,
                 bounds: extra.bounds,
+                backend: self.backend(),
+                error_stats: extra.error_stats,
             },
+        );
+    }
+
+    /// Gives up on the GPU for this job (and later ones on the same
+    /// density) after `error`, with a notice.
+    fn gpu_failed(&mut self, error: &GpuError) {
+        let job = self.job;
+        if let Some(gpu) = self.gpu.take() {
+            gpu.failed_for = Some((job.scene.medium.density.clone(), job.scene_dir.clone()));
+        }
+        push_error(
+            self.shared,
+            format!("GPU backend: {error}; rendering on the CPU instead"),
         );
     }
 
@@ -533,67 +685,82 @@ impl JobContext<'_> {
             }
             built
         };
+        let lights_view = lights
+            .clone()
+            .map(|l| Arc::new(LightsView::new(l, &job.scene)));
+        // The per-pixel light shares come from a CPU renderer on both
+        // backends (cheap to make: the lights are shared).
+        let shares = wants_internal.then(|| {
+            Arc::new(Renderer::with_lights(
+                prepared.clone(),
+                &settings_for(job, Estimator::Internal),
+                lights.clone(),
+            ))
+        });
+        if let Some(c) = self.newer() {
+            return Some(c);
+        }
+        let extra = |done, error_stats| SnapshotExtra {
+            lights: lights_view.clone(),
+            shares: shares.clone(),
+            done,
+            bounds,
+            error_stats,
+        };
+
+        if self.gpu.is_some() {
+            match self.run_gpu(&prepared, lights.as_deref(), &extra) {
+                Ok(next) => return next,
+                Err(e) => self.gpu_failed(&e),
+            }
+        }
+
         let engines: Vec<(Estimator, Arc<Renderer>)> = job
             .estimators
             .iter()
             .map(|&e| {
-                let settings = settings_for(job, e);
-                let cached = if e == Estimator::Internal {
-                    lights.clone()
-                } else {
-                    None
+                let renderer = match (&shares, e) {
+                    (Some(r), Estimator::Internal) => r.clone(),
+                    _ => {
+                        let settings = settings_for(job, e);
+                        Arc::new(Renderer::with_lights(prepared.clone(), &settings, None))
+                    }
                 };
-                (
-                    e,
-                    Arc::new(Renderer::with_lights(prepared.clone(), &settings, cached)),
-                )
+                (e, renderer)
             })
             .collect();
-        let lights_view = lights
-            .clone()
-            .map(|l| Arc::new(LightsView::new(l, &job.scene)));
-        let shares = engines
-            .iter()
-            .find(|(e, _)| *e == Estimator::Internal)
-            .map(|(_, r)| r.clone());
-        if let Some(c) = self.newer() {
-            return Some(c);
-        }
-
         let film = || Film::new(width, height);
         let mut films: Vec<[Film; 3]> = engines.iter().map(|_| [film(), film(), film()]).collect();
         for pass in 0..job.max_spp {
+            let pass_start = Instant::now();
             for ((estimator, engine), film) in engines.iter().zip(films.iter_mut()) {
                 let start = Instant::now();
                 let Some(image) = engine.pass(pass, self.cancel) else {
                     return self.next_command();
                 };
                 let secs = start.elapsed().as_secs_f64();
-                self.secs_per_sample[*estimator as usize] =
+                self.secs_per_sample[Backend::Cpu as usize][*estimator as usize] =
                     secs / (width as f64 * height as f64).max(1.0);
                 film[0].add_pass(&image.total);
                 film[1].add_pass(&image.single);
                 film[2].add_pass(&image.internal);
             }
+            trace("CPU pass", pass_start);
             let streams = engines
                 .iter()
                 .zip(&films)
                 .map(|((e, _), f)| stream_image(*e, f))
                 .collect();
-            self.publish(
-                streams,
-                SnapshotExtra {
-                    lights: lights_view.clone(),
-                    shares: shares.clone(),
-                    done: pass + 1 == job.max_spp,
-                    bounds,
-                },
-            );
+            self.publish(streams, extra(pass + 1 == job.max_spp, None));
             if let Some(c) = self.newer() {
                 return Some(c);
             }
         }
-        // Done: wait for the next job.
+        self.wait_for_next()
+    }
+
+    /// Done: waits for the next job.
+    fn wait_for_next(&self) -> Option<Command> {
         loop {
             match self.rx.recv_timeout(Duration::from_secs(3600)) {
                 Ok(c) => return Some(c),
@@ -602,6 +769,136 @@ impl JobContext<'_> {
             }
         }
     }
+
+    /// The job's full-resolution passes on the GPU: one dispatch per
+    /// estimator and pass, waited for (so that a new job never queues
+    /// behind many passes), then the statistics pass; returns the command
+    /// that replaced the job, or the error that stops the GPU from taking
+    /// it (nothing published then is wrong, only incomplete).
+    fn run_gpu(
+        &mut self,
+        prepared: &Prepared,
+        lights: Option<&InternalLights>,
+        extra: &dyn Fn(bool, Option<(f32, f32)>) -> SnapshotExtra,
+    ) -> Result<Option<Command>, GpuError> {
+        let job = self.job;
+        let Some(gpu) = self.gpu.as_deref() else {
+            return Ok(self.next_command());
+        };
+        let (width, height) = (prepared.camera.width, prepared.camera.height);
+        let t = Instant::now();
+        let mut engines = gpu_engines(&gpu.ctx, job, prepared, lights)?;
+        trace("GPU upload", t);
+        if let Some(c) = self.newer() {
+            return Ok(Some(c));
+        }
+        for pass in 0..job.max_spp {
+            if self.cancel.load(Ordering::Relaxed) {
+                return Ok(self.next_command());
+            }
+            let start = Instant::now();
+            for (_, engine) in engines.iter_mut() {
+                engine.add_pass(pass);
+            }
+            gpu.ctx.wait_idle()?;
+            trace("GPU pass", start);
+            let secs = start.elapsed().as_secs_f64() / engines.len().max(1) as f64;
+            for (e, _) in &engines {
+                self.secs_per_sample[Backend::Gpu as usize][*e as usize] =
+                    secs / (width as f64 * height as f64).max(1.0);
+            }
+            let (streams, error_stats) = gpu_streams(gpu, &engines)?;
+            self.publish(streams, extra(pass + 1 == job.max_spp, error_stats));
+            if let Some(c) = self.newer() {
+                return Ok(Some(c));
+            }
+        }
+        Ok(self.wait_for_next())
+    }
+}
+
+/// One GPU renderer per estimator of `job`.
+fn gpu_engines(
+    ctx: &GpuContext,
+    job: &Job,
+    prepared: &Prepared,
+    lights: Option<&InternalLights>,
+) -> Result<Vec<(Estimator, GpuRenderer)>, GpuError> {
+    job.estimators
+        .iter()
+        .map(|&e| {
+            let settings = settings_for(job, e);
+            let renderer = match e {
+                Estimator::Reference => GpuRenderer::reference(ctx, prepared, settings.seed)?,
+                Estimator::Internal => {
+                    let lights = lights.ok_or_else(|| GpuError::Wgpu {
+                        context: "the internal-lights gather".into(),
+                        message: "the internal lights were not built".into(),
+                    })?;
+                    GpuRenderer::internal(
+                        ctx,
+                        prepared,
+                        lights,
+                        settings.internal.light_samples,
+                        settings.seed,
+                    )?
+                }
+            };
+            Ok((e, renderer))
+        })
+        .collect()
+}
+
+/// Streams rendered on the GPU, with the RMSE of internal lights against
+/// the reference and the reference's mean where both are there.
+type GpuStreams = (Vec<StreamImage>, Option<(f32, f32)>);
+
+/// The streams of GPU renderers whose passes have finished, with their
+/// noise figures (and, with both estimators, the RMSE of internal lights
+/// against the reference and the reference's mean) from the statistics
+/// pass.
+fn gpu_streams(
+    gpu: &GpuWorker,
+    engines: &[(Estimator, GpuRenderer)],
+) -> Result<GpuStreams, GpuError> {
+    let reference = engines
+        .iter()
+        .find(|(e, _)| *e == Estimator::Reference)
+        .map(|(_, r)| r.accum_buffer());
+    let mut error_stats = None;
+    let mut streams = Vec::new();
+    for (estimator, engine) in engines {
+        let (width, height) = engine.size();
+        let other = match estimator {
+            Estimator::Internal => reference,
+            Estimator::Reference => None,
+        };
+        let stats: ImageStats = gpu.stats.stats(
+            engine.accum_buffer(),
+            other,
+            width,
+            height,
+            engine.samples(),
+        )?;
+        if other.is_some() {
+            error_stats = Some((stats.rmse(), stats.second_mean));
+        }
+        streams.push(StreamImage {
+            estimator: *estimator,
+            width,
+            height,
+            spp: engine.samples(),
+            mean: Vec::new(),
+            rel_error: stats.rel_error(engine.samples()),
+            single: None,
+            internal: None,
+            gpu: Some(GpuStream {
+                ctx: gpu.ctx.clone(),
+                accum: engine.accum_buffer().clone(),
+            }),
+        });
+    }
+    Ok((streams, error_stats))
 }
 
 /// What the low-resolution first look needs.
@@ -627,8 +924,9 @@ fn trace(stage: &str, since: Instant) {
 
 impl JobContext<'_> {
     /// Renders and publishes one pass at a reduced resolution chosen so that
-    /// it takes about [`PREVIEW_BUDGET`]; returns a newer command if one
-    /// arrived (or the wait after a cancellation).
+    /// it takes about [`PREVIEW_BUDGET`] (on the job's backend; on the CPU
+    /// if the GPU fails); returns a newer command if one arrived (or the
+    /// wait after a cancellation).
     fn preview(
         &mut self,
         input: &mut PreviewInput<'_>,
@@ -636,10 +934,11 @@ impl JobContext<'_> {
     ) -> Option<Command> {
         let job = self.job;
         let (width, height) = (job.scene.camera.width, job.scene.camera.height);
+        let backend = self.backend() as usize;
         let expected: f64 = job
             .estimators
             .iter()
-            .map(|&e| width as f64 * height as f64 * self.secs_per_sample[e as usize])
+            .map(|&e| width as f64 * height as f64 * self.secs_per_sample[backend][e as usize])
             .sum();
         let factor = (expected / PREVIEW_BUDGET.as_secs_f64())
             .sqrt()
@@ -653,29 +952,51 @@ impl JobContext<'_> {
         small.camera.width = (width / factor).max(1);
         small.camera.height = (height / factor).max(1);
         let prepared_small = Arc::new(Prepared::with_density(small.clone(), input.density.clone()));
-        let mut streams = Vec::new();
-        for &estimator in &job.estimators {
-            let settings = settings_for(job, estimator);
-            let cached = if estimator == Estimator::Internal {
-                lights.clone()
-            } else {
-                None
-            };
-            let renderer = Renderer::with_lights(prepared_small.clone(), &settings, cached);
-            let Some(pass) = renderer.pass(0, self.cancel) else {
-                return self.next_command();
-            };
-            streams.push(StreamImage {
-                estimator,
-                width: small.camera.width,
-                height: small.camera.height,
-                spp: 0,
-                mean: pass.total,
-                rel_error: 1.0,
-                single: None,
-                internal: None,
-            });
-        }
+        let gpu_streams = self.gpu.as_deref().map(|gpu| {
+            let mut engines = gpu_engines(&gpu.ctx, job, &prepared_small, lights.as_deref())?;
+            for (_, engine) in engines.iter_mut() {
+                engine.add_pass(0);
+            }
+            gpu.ctx.wait_idle()?;
+            gpu_streams(gpu, &engines).map(|(streams, _)| streams)
+        });
+        let streams = match gpu_streams {
+            Some(Ok(mut streams)) => {
+                for s in &mut streams {
+                    s.spp = 0;
+                    s.rel_error = 1.0;
+                }
+                streams
+            }
+            // The full passes will report the GPU's trouble, if it lasts.
+            Some(Err(_)) | None => {
+                let mut streams = Vec::new();
+                for &estimator in &job.estimators {
+                    let settings = settings_for(job, estimator);
+                    let cached = if estimator == Estimator::Internal {
+                        lights.clone()
+                    } else {
+                        None
+                    };
+                    let renderer = Renderer::with_lights(prepared_small.clone(), &settings, cached);
+                    let Some(pass) = renderer.pass(0, self.cancel) else {
+                        return self.next_command();
+                    };
+                    streams.push(StreamImage {
+                        estimator,
+                        width: small.camera.width,
+                        height: small.camera.height,
+                        spp: 0,
+                        mean: pass.total,
+                        rel_error: 1.0,
+                        single: None,
+                        internal: None,
+                        gpu: None,
+                    });
+                }
+                streams
+            }
+        };
         let view = lights.map(|l| Arc::new(LightsView::new(l, &job.scene)));
         self.publish(
             streams,
@@ -684,6 +1005,7 @@ impl JobContext<'_> {
                 shares: None,
                 done: false,
                 bounds: input.bounds,
+                error_stats: None,
             },
         );
         trace("preview", t);
@@ -697,6 +1019,7 @@ struct SnapshotExtra {
     shares: Option<Arc<Renderer>>,
     done: bool,
     bounds: Option<(Vec3, Vec3)>,
+    error_stats: Option<(f32, f32)>,
 }
 
 fn stream_image(estimator: Estimator, films: &[Film; 3]) -> StreamImage {
@@ -721,5 +1044,6 @@ fn stream_image(estimator: Estimator, films: &[Film; 3]) -> StreamImage {
         rel_error,
         single: Some(films[1].mean()),
         internal: Some(films[2].mean()),
+        gpu: None,
     }
 }

@@ -11,7 +11,7 @@ use egui_plot::{Bar, BarChart, Plot};
 use glam::Vec3;
 
 use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
-use super::backend::ClockKind;
+use super::backend::{Backend, ClockKind};
 use crate::render::tonemap::ViewTransform;
 use crate::scene::L1Kind;
 use crate::scene::{Light, Method};
@@ -26,6 +26,11 @@ pub const PHASE_G: &str = "g (phase)";
 pub const TERMS: &str = "N (series terms)";
 /// Label of the exposure slider.
 pub const EXPOSURE: &str = "exposure (stops)";
+/// Label of the GPU backend's button.
+pub const BACKEND_GPU: &str = "GPU";
+/// Label of the CPU backend's button.
+pub const BACKEND_CPU: &str = "CPU";
+
 /// Label of the density-scale slider.
 pub const DENSITY_SCALE: &str = "density scale";
 
@@ -351,7 +356,35 @@ fn rgb_intensity_ui(ui: &mut Ui, value: &mut Vec3, label: &str, tip: &str) {
     });
 }
 
+/// The backend switch and a line saying where the image is rendered.
+fn backend_ui(ui: &mut Ui, app: &mut LanternApp) {
+    ui.horizontal(|ui| {
+        ui.label("backend");
+        let before = app.session.backend;
+        ui.selectable_value(&mut app.session.backend, Backend::Gpu, BACKEND_GPU)
+            .on_hover_text(
+                "Render with wgpu compute shaders on the window's device; the \
+                 image stays on the GPU. Falls back to the CPU where there is no \
+                 GPU or the scene does not fit.",
+            );
+        ui.selectable_value(&mut app.session.backend, Backend::Cpu, BACKEND_CPU)
+            .on_hover_text("Render with the CPU renderers.");
+        if app.session.backend != before {
+            app.gpu_notice_shown = false;
+        }
+    });
+    let status = app.backend_status();
+    let fallback = app.session.backend == Backend::Gpu && app.active_backend() == Backend::Cpu;
+    let text = egui::RichText::new(status).small();
+    ui.label(if fallback {
+        text.color(ui.visuals().warn_fg_color)
+    } else {
+        text.weak()
+    });
+}
+
 fn render_ui(ui: &mut Ui, app: &mut LanternApp) {
+    backend_ui(ui, app);
     let session = &mut app.session;
     ui.horizontal_wrapped(|ui| {
         for (mode, name, tip) in [

@@ -257,6 +257,9 @@ pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), 
         .find(|s| s.estimator == shown)
         .or_else(|| snapshot.streams.first())
         .ok_or_else(|| "nothing rendered yet".to_string())?;
+    // On the GPU backend the image is read back from the device here (the
+    // only read-back of the previewer besides its statistics).
+    let stream = stream.resolved()?;
     match extension(path).as_deref() {
         Some("exr") => {
             let mut meta = render_metadata(app);

@@ -10,11 +10,14 @@
 //! - [`viewport`]: the progressive image, camera navigation, gizmos and the
 //!   comparisons (split view, error heatmap).
 //! - [`files`]: scene files, drag and drop, recent files and image export.
+//! - [`gpu_view`]: the GPU backend on the window's own device, and the
+//!   shown image as a texture written on the GPU.
 
 pub mod app;
 pub mod backend;
 pub mod controls;
 pub mod files;
+pub mod gpu_view;
 pub mod viewport;
 
 use std::path::PathBuf;
@@ -64,6 +67,7 @@ pub fn run(options: LaunchOptions) -> anyhow::Result<()> {
             .with_drag_and_drop(true),
         renderer: eframe::Renderer::Wgpu,
         persist_window: options.script.is_none(),
+        wgpu_options: gpu_view::wgpu_options(),
         ..Default::default()
     };
 

@@ -17,15 +17,26 @@ use crate::render::tonemap::to_srgb8;
 use crate::scene::{Camera, CameraFrame, Light, Scene};
 
 /// The image on screen: the snapshot it was made from and its textures.
+///
+/// On the CPU backend the means are tone-mapped here and uploaded; on the
+/// GPU backend the display pass writes a texture on the device from the
+/// accumulation buffers ([`super::gpu_view`]), composing the split view
+/// and the heatmap there too.
 #[derive(Default)]
 pub struct Display {
+    /// The GPU display, where the window has a GPU.
+    gpu_view: Option<super::gpu_view::GpuView>,
+    /// The texture the GPU display wrote, when the image on screen came
+    /// from the GPU.
+    gpu_texture: Option<egui::TextureId>,
     snapshot: Option<Arc<Snapshot>>,
     /// The main image (the left one in the split view).
     texture: Option<TextureHandle>,
     /// The right image of the split view.
     texture_right: Option<TextureHandle>,
-    /// What the textures were made with.
-    made_with: Option<(f32, crate::render::tonemap::ViewTransform, CompareMode)>,
+    /// What the textures were made with (the divider only matters to the
+    /// GPU display, which composes the split view itself).
+    made_with: Option<(f32, crate::render::tonemap::ViewTransform, CompareMode, f32)>,
     /// Root-mean-square error of internal lights against the reference.
     pub rmse: Option<f32>,
     /// Mean of the reference image (to state the RMSE relatively).
@@ -36,7 +47,13 @@ impl Display {
     /// Re-makes the textures if the snapshot or the display settings
     /// changed; returns whether it did.
     pub fn update(&mut self, ctx: &egui::Context, snapshot: Arc<Snapshot>, s: &Session) -> bool {
-        let key = (s.exposure, s.view, s.compare);
+        let on_gpu = snapshot.streams.iter().any(|st| st.gpu.is_some());
+        let split = if on_gpu && s.compare == CompareMode::Split {
+            s.split
+        } else {
+            0.0
+        };
+        let key = (s.exposure, s.view, s.compare, split);
         let same_snapshot = self
             .snapshot
             .as_ref()
@@ -44,6 +61,23 @@ impl Display {
         if same_snapshot && self.made_with == Some(key) {
             return false;
         }
+        if on_gpu {
+            match self.update_gpu(&snapshot, s) {
+                Ok(()) => {
+                    self.snapshot = Some(snapshot);
+                    self.made_with = Some(key);
+                    return true;
+                }
+                Err(e) => {
+                    // Keep what is on screen; say why once per snapshot.
+                    eprintln!("lantern: the GPU display failed: {e}");
+                    self.snapshot = Some(snapshot);
+                    self.made_with = Some(key);
+                    return false;
+                }
+            }
+        }
+        self.gpu_texture = None;
         let find = |e: Estimator| snapshot.streams.iter().find(|st| st.estimator == e);
         let first = snapshot.streams.first();
         let (left, right) = match s.compare {
@@ -85,6 +119,70 @@ impl Display {
         self.snapshot = Some(snapshot);
         self.made_with = Some(key);
         true
+    }
+
+    /// Gives the display the GPU view it draws GPU snapshots with.
+    pub fn set_gpu_view(&mut self, view: Option<super::gpu_view::GpuView>) {
+        self.gpu_view = view;
+    }
+
+    /// The texture of the image on screen when the GPU display made it
+    /// (the whole image, split view included).
+    pub fn gpu_texture(&self) -> Option<egui::TextureId> {
+        self.gpu_texture
+    }
+
+    /// Draws a GPU snapshot with the display pass.
+    fn update_gpu(&mut self, snapshot: &Snapshot, s: &Session) -> Result<(), String> {
+        use crate::gpu::display::{DisplayMode, DisplaySettings};
+        let view = self
+            .gpu_view
+            .as_mut()
+            .ok_or_else(|| "no GPU display in this window".to_string())?;
+        let find = |e: Estimator| {
+            snapshot
+                .streams
+                .iter()
+                .find(|st| st.estimator == e && st.gpu.is_some())
+        };
+        let first = snapshot.streams.iter().find(|st| st.gpu.is_some());
+        let internal = find(Estimator::Internal).or(first);
+        let reference = find(Estimator::Reference);
+        self.rmse = None;
+        self.reference_mean = None;
+        let (a, b, mode) = match s.compare {
+            CompareMode::Internal => (internal, None, DisplayMode::Single),
+            CompareMode::Reference => (reference.or(first), None, DisplayMode::Single),
+            CompareMode::Split if reference.is_some() => {
+                (internal, reference, DisplayMode::Split(s.split))
+            }
+            CompareMode::Error => match (snapshot.error_stats, reference) {
+                (Some((rmse, mean)), Some(r)) => {
+                    self.rmse = Some(rmse);
+                    self.reference_mean = Some(mean);
+                    let scale = if mean > 0.0 { 1.0 / mean } else { 1.0 };
+                    (internal, Some(r), DisplayMode::Heat(scale))
+                }
+                _ => (first, None, DisplayMode::Single),
+            },
+            CompareMode::Split => (first, None, DisplayMode::Single),
+        };
+        let a = a.ok_or_else(|| "no image".to_string())?;
+        let buffer = |st: &StreamImage| st.gpu.as_ref().map(|g| g.accum.clone());
+        let a_buf = buffer(a).ok_or_else(|| "no GPU image".to_string())?;
+        let b_buf = b.and_then(buffer);
+        let settings = DisplaySettings {
+            exposure: s.exposure,
+            view: s.view,
+            mode,
+        };
+        let id = view
+            .draw(&a_buf, b_buf.as_ref(), a.width, a.height, &settings)
+            .map_err(|e| e.to_string())?;
+        self.gpu_texture = Some(id);
+        self.texture = None;
+        self.texture_right = None;
+        Ok(())
     }
 
     /// The snapshot on screen.
@@ -289,7 +387,9 @@ pub fn viewport_ui(ui: &mut Ui, app: &mut LanternApp) {
     }
 
     let full_uv = Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0));
-    if let Some(t) = &app.display.texture {
+    if let Some(id) = app.display.gpu_texture() {
+        painter.image(id, rect, full_uv, Color32::WHITE);
+    } else if let Some(t) = &app.display.texture {
         if app.session.compare == CompareMode::Split {
             let x = rect.left() + app.session.split.clamp(0.0, 1.0) * rect.width();
             let left = Rect::from_min_max(rect.min, Pos2::new(x, rect.bottom()));
