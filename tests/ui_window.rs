@@ -46,6 +46,9 @@ fn the_window_renders_and_screenshots_itself() {
         .env("LANTERN_SCRIPT_SPP", "8")
         .env("LANTERN_SCRIPT_TIMEOUT_SECS", "240")
         .env("LANTERN_VIEW", "split")
+        // The previewer starts on the CPU on a software GPU such as
+        // lavapipe; the GPU backend is asked for explicitly here.
+        .env("LANTERN_BACKEND", "gpu")
         // Keep the user's session file out of it.
         .env("XDG_DATA_HOME", dir.path())
         .output()
@@ -161,5 +164,56 @@ fn with_the_gpu_forced_off_the_cpu_renders_and_a_notice_says_so() {
     assert!(
         red > 500,
         "no red notice in the lower right corner ({red} pixels)"
+    );
+}
+
+/// On a software GPU (lavapipe here) the previewer starts on the CPU, which
+/// is faster there, and says so; the backend line names the CPU.
+#[test]
+fn on_a_software_gpu_the_cpu_renders_by_default_and_says_why() {
+    let required = std::env::var("LANTERN_REQUIRE_DISPLAY").is_ok_and(|v| v == "1");
+    if !display_available() {
+        assert!(
+            !required,
+            "LANTERN_REQUIRE_DISPLAY=1 but there is no DISPLAY (run under xvfb-run)"
+        );
+        println!("notice: no display; the previewer window test is skipped");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("temp dir");
+    let shot = dir.path().join("software.png");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes/thin_sphere.ron");
+    let output = Command::new(env!("CARGO_BIN_EXE_lantern"))
+        .arg("view")
+        .arg(&scene)
+        .env_remove("LANTERN_BACKEND")
+        .env_remove("LANTERN_GPU")
+        .env("LANTERN_SCREENSHOT", &shot)
+        .env("LANTERN_SCRIPT_SPP", "1")
+        .env("LANTERN_RENDER_SIZE", "160x120")
+        .env("LANTERN_SCRIPT_TIMEOUT_SECS", "240")
+        .env("XDG_DATA_HOME", dir.path())
+        .output()
+        .expect("run the previewer");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        output.status.success(),
+        "previewer failed ({}):\n{stdout}\n{stderr}",
+        output.status
+    );
+    if stdout.contains("lantern: rendering on the GPU") {
+        // A hardware adapter: the GPU is the default, nothing to say.
+        assert!(!stderr.contains("is a software GPU"), "{stderr}");
+        println!("notice: hardware GPU; the software-GPU default is not exercised");
+        return;
+    }
+    assert!(
+        stderr.contains("is a software GPU: rendering on the CPU"),
+        "no notice about the software GPU:\n{stdout}\n{stderr}"
+    );
+    assert!(
+        stdout.contains("lantern: rendering on the CPU"),
+        "the CPU backend is not active:\n{stdout}\n{stderr}"
     );
 }

@@ -397,7 +397,26 @@ impl LanternApp {
         match std::env::var("LANTERN_BACKEND").as_deref() {
             Ok("cpu") => app.session.backend = Backend::Cpu,
             Ok("gpu") => app.session.backend = Backend::Gpu,
-            _ => {}
+            _ => {
+                // A software rasteriser (lavapipe, llvmpipe) runs the compute
+                // shaders on the CPU cores, at about half the CPU renderer's
+                // speed and in passes that cannot be interrupted, which
+                // stalls the window (measured on the cloud at 512²: 3 frames/s
+                // against 9.5, README "Previewer"); start on the CPU there
+                // and say so. The switch still selects the GPU.
+                if let Ok(ctx) = &gpu {
+                    if ctx.is_software() && app.session.backend == Backend::Gpu {
+                        app.session.backend = Backend::Cpu;
+                        let text = format!(
+                            "{} is a software GPU: rendering on the CPU, which is faster \
+                             here (Render ▸ backend selects the GPU)",
+                            ctx.adapter_info.name
+                        );
+                        eprintln!("lantern: {text}");
+                        app.notify(text);
+                    }
+                }
+            }
         }
         app.forced_render_size = options.script.as_ref().and_then(|s| s.render_size);
         app.script = options.script;
