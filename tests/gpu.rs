@@ -37,9 +37,8 @@ use lantern::gpu::mirrors::{
     GpuAccum, GpuCamera, GpuGatherParams, GpuLight, GpuMedium, GpuPassParams, GpuScene,
 };
 use lantern::gpu::shaders::{ModuleSource, MODULES};
-use lantern::gpu::{GpuContext, GpuImage, GpuRenderer};
+use lantern::gpu::GpuRenderer;
 use lantern::physics::internal::InternalLights;
-use lantern::render::film::image_mean;
 use lantern::render::{internal_params, Film, Prepared};
 use lantern::scene::{ClockKind, L1Kind, Method};
 
@@ -240,27 +239,9 @@ fn mirrors_match_wgsl_layout() {
     );
 }
 
-/// A GPU context, or `None` (with a notice) where there is no adapter;
-/// panics instead when `LANTERN_REQUIRE_GPU=1`.
-fn gpu() -> Option<GpuContext> {
-    match GpuContext::new_headless() {
-        Ok(ctx) => {
-            println!("GPU adapter: {}", ctx.describe());
-            Some(ctx)
-        }
-        Err(e) => {
-            if std::env::var("LANTERN_REQUIRE_GPU").is_ok_and(|v| v == "1") {
-                panic!("LANTERN_REQUIRE_GPU=1 but: {e:#}");
-            }
-            eprintln!("notice: skipping GPU test: {e:#}");
-            None
-        }
-    }
-}
-
 #[test]
 fn oversized_buffers_fail_naming_the_limit() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let max = ctx.limits.max_storage_buffer_binding_size;
     println!(
         "max_storage_buffer_binding_size {max} bytes, max_buffer_size {} bytes",
@@ -275,52 +256,6 @@ fn oversized_buffers_fail_naming_the_limit() {
     assert!(ctx.check_storage_size("density grid", max).is_ok());
 }
 
-/// Variance of an image's mean per channel: pixels are independent, so
-/// the per-pixel variances of the mean add up.
-fn variance_of_image_mean(film: &Film) -> Vec3 {
-    let v = film.variance_of_mean();
-    let n = v.len() as f32;
-    v.iter().copied().sum::<Vec3>() / (n * n)
-}
-
-/// Compares a GPU image with a CPU film of the same scene (independent
-/// seeds): image means per channel within 4σ of their difference and
-/// |z| < 3 for at least 97 % of pixel channels; dumps both on failure.
-fn compare_backends(label: &str, image: &GpuImage, cpu: &Film, timing: &str) {
-    let gpu = image.film();
-    let (a, b) = (gpu.mean(), cpu.mean());
-    let cmp = common::compare(
-        &a,
-        &gpu.variance_of_mean(),
-        &b,
-        &cpu.variance_of_mean(),
-        3.0,
-    );
-    let sigma = (variance_of_image_mean(&gpu) + variance_of_image_mean(cpu)).powf(0.5);
-    let diff = cmp.mean_a - cmp.mean_b;
-    let z_means = diff / sigma.max(Vec3::splat(1e-12));
-    let single_gpu = image_mean(&image.single_mean());
-    println!(
-        "{label}: GPU mean {:.5?} CPU mean {:.5?} (Δ/σ {:.2?}); GPU single {:.5?}; per-pixel |z|<3: {:.4}; {timing}",
-        cmp.mean_a.to_array(),
-        cmp.mean_b.to_array(),
-        z_means.to_array(),
-        single_gpu.to_array(),
-        cmp.z_pass_fraction,
-    );
-    let ok = z_means.abs().max_element() < 4.0 && cmp.z_pass_fraction >= 0.97;
-    if !ok {
-        let name = label.replace(['/', ' ', '²', '×'], "_");
-        let pa = common::dump(&format!("{name}_gpu"), image.width, image.height, &a);
-        let pb = common::dump(&format!("{name}_cpu"), image.width, image.height, &b);
-        panic!(
-            "{label}: GPU and CPU disagree: {cmp:?}, Δ/σ {z_means}; images in {} and {}",
-            pa.display(),
-            pb.display()
-        );
-    }
-}
-
 /// The scene at `side`², prepared.
 fn prepare_small(scene: &str, side: u32) -> Arc<Prepared> {
     Arc::new(common::prepare_with(scene, |s| {
@@ -332,7 +267,7 @@ fn prepare_small(scene: &str, side: u32) -> Arc<Prepared> {
 /// Renders `scene` at `side`² with `spp` with the reference method on both
 /// backends and compares.
 fn agree(scene: &str, side: u32, spp: u32) {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let prepared = prepare_small(scene, side);
     let t = Instant::now();
     let cpu = common::render(&prepared, Method::Reference, 1, spp);
@@ -346,7 +281,7 @@ fn agree(scene: &str, side: u32, spp: u32) {
     let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
     let gpu_secs = t.elapsed().as_secs_f64();
     assert_eq!(image.samples, spp);
-    compare_backends(
+    common::compare_backends(
         &format!("{scene} reference {side}²×{spp} spp"),
         &image,
         &cpu,
@@ -366,7 +301,7 @@ const CPU_SPP_PER_GPU_SPP: u32 = 8;
 /// `spp` samples per pixel on the GPU and [`CPU_SPP_PER_GPU_SPP`] times as
 /// many on the CPU, and compares.
 fn agree_gather(scene: &str, clock: ClockKind, l1: L1Kind, side: u32, spp: u32) {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let prepared = prepare_small(scene, side);
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
@@ -401,7 +336,7 @@ fn agree_gather(scene: &str, clock: ClockKind, l1: L1Kind, side: u32, spp: u32) 
     }
     let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
     let gpu_secs = t.elapsed().as_secs_f64();
-    compare_backends(
+    common::compare_backends(
         &format!(
             "{scene} internal-lights gather (M = {}, {:?} clock, {:?} L1) {side}², GPU {spp} spp, CPU {} spp",
             cache.len(),
@@ -543,7 +478,7 @@ fn chi2_z(counts: &[u64], probs: &[f64]) -> (f64, usize) {
 }
 
 fn placement_case(scene: &str, u_mix: f32) {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let prepared = prepare_small(scene, 8);
     let m = 1usize << 17;
     let params = walk_params(&prepared, |p| {
@@ -767,7 +702,7 @@ fn walks_case(
     k: u32,
     terms: u32,
 ) {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let prepared = prepare_small(scene, 8);
     let params = walk_params(&prepared, |p| {
         p.lights = m;
@@ -946,7 +881,7 @@ fn gather_mean(prepared: &Arc<Prepared>, cache: InternalLights, spp: u32, seed: 
 /// noise), and a GPU build with the albedo 10 % low does not.
 #[test]
 fn gather_with_gpu_built_lights_agrees_thin_sphere() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let scene = "assets/scenes/thin_sphere.ron";
     let side = 16;
     let prepared = prepare_small(scene, side);
@@ -1054,7 +989,7 @@ fn walk_mirrors_match_wgsl_layout() {
 /// device can hold, fail with an error naming the parameter or the buffer.
 #[test]
 fn gpu_walks_refuse_what_they_cannot_hold() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let prepared = prepare_small("assets/scenes/thin_sphere.ron", 8);
     let params = walk_params(&prepared, |p| p.terms = 4096);
     let msg = format!(

@@ -29,24 +29,6 @@ use lantern::ui::backend::{Backend, Estimator, Job, Snapshot, Worker};
 use lantern::ui::viewport::heat;
 use wgpu::util::DeviceExt;
 
-/// A GPU context, or `None` (with a notice) where there is no adapter;
-/// panics instead when `LANTERN_REQUIRE_GPU=1`.
-fn gpu() -> Option<GpuContext> {
-    match GpuContext::new_headless() {
-        Ok(ctx) => {
-            println!("GPU adapter: {}", ctx.describe());
-            Some(ctx)
-        }
-        Err(e) => {
-            if std::env::var("LANTERN_REQUIRE_GPU").is_ok_and(|v| v == "1") {
-                panic!("LANTERN_REQUIRE_GPU=1 but: {e:#}");
-            }
-            eprintln!("notice: skipping GPU test: {e:#}");
-            None
-        }
-    }
-}
-
 /// An accumulation buffer holding `means` (one sample's worth of them).
 fn accum_buffer(ctx: &GpuContext, means: &[Vec3]) -> wgpu::Buffer {
     let pixels: Vec<GpuAccum> = means
@@ -110,7 +92,7 @@ fn test_values() -> Vec<Vec3> {
 
 #[test]
 fn display_tonemap_equals_the_cpu_tonemap() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let pass = DisplayPass::new(&ctx).unwrap_or_else(|e| panic!("{e:#}"));
     let values = test_values();
     let mut worst = 0i32;
@@ -144,7 +126,7 @@ fn display_tonemap_equals_the_cpu_tonemap() {
 
 #[test]
 fn display_split_and_heatmap_follow_the_viewport() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let pass = DisplayPass::new(&ctx).unwrap_or_else(|e| panic!("{e:#}"));
     let (w, h) = (16u32, 4u32);
     let a: Vec<Vec3> = (0..w * h)
@@ -207,7 +189,7 @@ fn display_split_and_heatmap_follow_the_viewport() {
 
 #[test]
 fn statistics_pass_equals_the_cpu_sums() {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let pass = DisplayPass::new(&ctx).unwrap_or_else(|e| panic!("{e:#}"));
     let (w, h, samples) = (37u32, 29u32, 5u32);
     let n = (w * h) as usize;
@@ -316,7 +298,7 @@ fn worker_agrees(
     cpu_spp: u32,
     seeds: (u64, u64),
 ) {
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     let mut gpu_worker = Worker::start_with_gpu(Box::new(|_| {}), Some(ctx));
     let t = Instant::now();
     let (gpu_snap, errors) = render_with(
@@ -413,7 +395,7 @@ fn gpu_worker_agrees_with_cpu_worker_internal_lights() {
 /// (48 kB): the worker must say so and render on the CPU.
 #[test]
 fn a_scene_too_large_for_the_device_falls_back_to_the_cpu_with_a_notice() {
-    if gpu().is_none() {
+    if common::gpu().is_none() {
         return;
     }
     let small = pollster::block_on(async {

@@ -15,9 +15,9 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::{UVec3, Vec3};
-use lantern::gpu::{GpuContext, GpuImage, GpuRenderer};
+use lantern::gpu::GpuRenderer;
 use lantern::render::film::image_mean;
-use lantern::render::{Film, Prepared};
+use lantern::render::Prepared;
 use lantern::scene::volume::{load_grid, write_mitsuba_vol};
 use lantern::scene::{Density, GridFormat, Method, VoxelGrid};
 use rayon::prelude::*;
@@ -59,46 +59,6 @@ fn peak_rss_mib() -> Option<f64> {
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kib / 1024.0)
-}
-
-fn gpu() -> Option<GpuContext> {
-    match GpuContext::new_headless() {
-        Ok(ctx) => Some(ctx),
-        Err(e) => {
-            if std::env::var("LANTERN_REQUIRE_GPU").is_ok_and(|v| v == "1") {
-                panic!("LANTERN_REQUIRE_GPU=1 but: {e:#}");
-            }
-            eprintln!("notice: skipping the GPU half of the 512³ test: {e:#}");
-            None
-        }
-    }
-}
-
-/// Means within 4σ of their difference per channel, and |z| < 3 for at
-/// least 97 % of pixel channels.
-fn assert_agree(label: &str, gpu: &GpuImage, cpu: &Film) {
-    let g = gpu.film();
-    let cmp = common::compare(
-        &g.mean(),
-        &g.variance_of_mean(),
-        &cpu.mean(),
-        &cpu.variance_of_mean(),
-        3.0,
-    );
-    let n = (IMAGE * IMAGE) as f32;
-    let var = |f: &Film| f.variance_of_mean().iter().copied().sum::<Vec3>() / (n * n);
-    let sigma = (var(&g) + var(cpu)).powf(0.5).max(Vec3::splat(1e-12));
-    let z = (cmp.mean_a - cmp.mean_b) / sigma;
-    println!(
-        "{label}: GPU mean {:?}, CPU mean {:?}, Δ/σ {z:?}, per-pixel pass {:.4}",
-        cmp.mean_a, cmp.mean_b, cmp.z_pass_fraction
-    );
-    assert!(
-        z.abs().max_element() < 4.0 && cmp.z_pass_fraction >= 0.97,
-        "{label}: backends disagree (Δ/σ {z:?}, per-pixel pass {:.4}); images in {}",
-        cmp.z_pass_fraction,
-        common::dump(&format!("{label}-gpu"), IMAGE, IMAGE, &g.mean()).display()
-    );
 }
 
 #[test]
@@ -164,7 +124,7 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
         peak_rss_mib().unwrap_or(f64::NAN)
     );
 
-    let Some(ctx) = gpu() else { return };
+    let Some(ctx) = common::gpu() else { return };
     println!("GPU adapter: {}", ctx.describe());
     let t = Instant::now();
     let mut renderer =
@@ -182,7 +142,7 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
         gpu_mib > 512.0,
         "the grid is not on the GPU ({gpu_mib:.0} MiB)"
     );
-    assert_agree("512³ reference", &image, &cpu_ref);
+    common::compare_backends("512³ reference", &image, &cpu_ref, "");
     drop(renderer);
 
     let t = Instant::now();
@@ -199,5 +159,5 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
         image_mean(&image.single_mean()),
         peak_rss_mib().unwrap_or(f64::NAN)
     );
-    assert_agree("512³ internal", &image, &cpu_int);
+    common::compare_backends("512³ internal", &image, &cpu_int, "");
 }

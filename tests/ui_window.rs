@@ -25,8 +25,19 @@ fn display_available() -> bool {
         .any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()))
 }
 
-#[test]
-fn the_window_renders_and_screenshots_itself() {
+/// What a scripted previewer run left: its output and the screenshot (in
+/// `dir`, which must outlive the checks).
+struct Run {
+    stdout: String,
+    stderr: String,
+    shot: std::path::PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+/// Runs `lantern view SCENE` (relative to the repository) with the script
+/// environment `env`, saving a screenshot; `None`, with a notice, where
+/// there is no display (a failure with `LANTERN_REQUIRE_DISPLAY=1`).
+fn run_previewer(scene: &str, env: &[(&str, &str)]) -> Option<Run> {
     let required = std::env::var("LANTERN_REQUIRE_DISPLAY").is_ok_and(|v| v == "1");
     if !display_available() {
         assert!(
@@ -34,32 +45,53 @@ fn the_window_renders_and_screenshots_itself() {
             "LANTERN_REQUIRE_DISPLAY=1 but there is no DISPLAY (run under xvfb-run)"
         );
         println!("notice: no display; the previewer window test is skipped (set DISPLAY or use xvfb-run)");
-        return;
+        return None;
     }
     let dir = tempfile::tempdir().expect("temp dir");
     let shot = dir.path().join("previewer.png");
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes/cloud.ron");
-    let output = Command::new(env!("CARGO_BIN_EXE_lantern"))
-        .arg("view")
-        .arg(&scene)
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_lantern"));
+    cmd.arg("view")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join(scene))
+        .env_remove("LANTERN_BACKEND")
+        .env_remove("LANTERN_GPU")
         .env("LANTERN_SCREENSHOT", &shot)
-        .env("LANTERN_SCRIPT_SPP", "8")
         .env("LANTERN_SCRIPT_TIMEOUT_SECS", "240")
-        .env("LANTERN_VIEW", "split")
-        // The previewer starts on the CPU on a software GPU such as
-        // lavapipe; the GPU backend is asked for explicitly here.
-        .env("LANTERN_BACKEND", "gpu")
         // Keep the user's session file out of it.
-        .env("XDG_DATA_HOME", dir.path())
-        .output()
-        .expect("run the previewer");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
+        .env("XDG_DATA_HOME", dir.path());
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let output = cmd.output().expect("run the previewer");
+    let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
     assert!(
         output.status.success(),
         "previewer failed ({}):\n{stdout}\n{stderr}",
         output.status
     );
+    Some(Run {
+        stdout,
+        stderr,
+        shot,
+        _dir: dir,
+    })
+}
+
+#[test]
+fn the_window_renders_and_screenshots_itself() {
+    let Some(run) = run_previewer(
+        "assets/scenes/cloud.ron",
+        &[
+            ("LANTERN_SCRIPT_SPP", "8"),
+            ("LANTERN_VIEW", "split"),
+            // The previewer starts on the CPU on a software GPU such as
+            // lavapipe; the GPU backend is asked for explicitly here.
+            ("LANTERN_BACKEND", "gpu"),
+        ],
+    ) else {
+        return;
+    };
+    let (stdout, stderr, shot) = (&run.stdout, &run.stderr, &run.shot);
     assert!(stdout.contains("screenshot at"), "{stdout}\n{stderr}");
     // The window has a wgpu device, so the GPU backend renders (the app
     // prints the panel's backend line once the first full image is shown).
@@ -68,7 +100,7 @@ fn the_window_renders_and_screenshots_itself() {
         "the GPU backend is not active:\n{stdout}\n{stderr}"
     );
 
-    let image = image::open(&shot).expect("read screenshot").to_rgb8();
+    let image = image::open(shot).expect("read screenshot").to_rgb8();
     let (w, h) = image.dimensions();
     assert!(w >= 800 && h >= 500, "screenshot is {w}×{h}");
     // The viewport (right of the panel) shows a lit cloud: bright pixels and
@@ -101,42 +133,23 @@ fn the_window_renders_and_screenshots_itself() {
     let panel_mean = panel.iter().sum::<f32>() / panel.len() as f32;
     assert!(panel_mean < 100.0, "side panel missing (mean {panel_mean})");
     if let Ok(keep) = std::env::var("LANTERN_KEEP_SCREENSHOT") {
-        std::fs::copy(&shot, keep).expect("copy screenshot");
+        std::fs::copy(shot, keep).expect("copy screenshot");
     }
 }
 
 #[test]
 fn with_the_gpu_forced_off_the_cpu_renders_and_a_notice_says_so() {
-    let required = std::env::var("LANTERN_REQUIRE_DISPLAY").is_ok_and(|v| v == "1");
-    if !display_available() {
-        assert!(
-            !required,
-            "LANTERN_REQUIRE_DISPLAY=1 but there is no DISPLAY (run under xvfb-run)"
-        );
-        println!("notice: no display; the previewer window test is skipped");
+    let Some(run) = run_previewer(
+        "assets/scenes/thin_sphere.ron",
+        &[
+            ("LANTERN_GPU", "off"),
+            ("LANTERN_SCRIPT_SPP", "1"),
+            ("LANTERN_RENDER_SIZE", "160x120"),
+        ],
+    ) else {
         return;
-    }
-    let dir = tempfile::tempdir().expect("temp dir");
-    let shot = dir.path().join("fallback.png");
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes/thin_sphere.ron");
-    let output = Command::new(env!("CARGO_BIN_EXE_lantern"))
-        .arg("view")
-        .arg(&scene)
-        .env("LANTERN_GPU", "off")
-        .env("LANTERN_SCREENSHOT", &shot)
-        .env("LANTERN_SCRIPT_SPP", "1")
-        .env("LANTERN_RENDER_SIZE", "160x120")
-        .env("LANTERN_SCRIPT_TIMEOUT_SECS", "240")
-        .env("XDG_DATA_HOME", dir.path())
-        .output()
-        .expect("run the previewer");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(
-        output.status.success(),
-        "previewer failed ({}):\n{stdout}\n{stderr}",
-        output.status
-    );
+    };
+    let (stdout, stderr, shot) = (&run.stdout, &run.stderr, &run.shot);
     // The notification (a toast; notify_error also logs it) and the panel's
     // backend line.
     assert!(
@@ -152,7 +165,7 @@ fn with_the_gpu_forced_off_the_cpu_renders_and_a_notice_says_so() {
         "the CPU backend is not active:\n{stdout}\n{stderr}"
     );
     // The toast is on screen: its dark red fill in the lower right corner.
-    let image = image::open(&shot).expect("read screenshot").to_rgb8();
+    let image = image::open(shot).expect("read screenshot").to_rgb8();
     let (w, h) = image.dimensions();
     let red = (w * 2 / 3..w)
         .flat_map(|x| (h * 2 / 3..h).map(move |y| (x, y)))
@@ -171,37 +184,16 @@ fn with_the_gpu_forced_off_the_cpu_renders_and_a_notice_says_so() {
 /// is faster there, and says so; the backend line names the CPU.
 #[test]
 fn on_a_software_gpu_the_cpu_renders_by_default_and_says_why() {
-    let required = std::env::var("LANTERN_REQUIRE_DISPLAY").is_ok_and(|v| v == "1");
-    if !display_available() {
-        assert!(
-            !required,
-            "LANTERN_REQUIRE_DISPLAY=1 but there is no DISPLAY (run under xvfb-run)"
-        );
-        println!("notice: no display; the previewer window test is skipped");
+    let Some(run) = run_previewer(
+        "assets/scenes/thin_sphere.ron",
+        &[
+            ("LANTERN_SCRIPT_SPP", "1"),
+            ("LANTERN_RENDER_SIZE", "160x120"),
+        ],
+    ) else {
         return;
-    }
-    let dir = tempfile::tempdir().expect("temp dir");
-    let shot = dir.path().join("software.png");
-    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes/thin_sphere.ron");
-    let output = Command::new(env!("CARGO_BIN_EXE_lantern"))
-        .arg("view")
-        .arg(&scene)
-        .env_remove("LANTERN_BACKEND")
-        .env_remove("LANTERN_GPU")
-        .env("LANTERN_SCREENSHOT", &shot)
-        .env("LANTERN_SCRIPT_SPP", "1")
-        .env("LANTERN_RENDER_SIZE", "160x120")
-        .env("LANTERN_SCRIPT_TIMEOUT_SECS", "240")
-        .env("XDG_DATA_HOME", dir.path())
-        .output()
-        .expect("run the previewer");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(
-        output.status.success(),
-        "previewer failed ({}):\n{stdout}\n{stderr}",
-        output.status
-    );
+    };
+    let (stdout, stderr) = (&run.stdout, &run.stderr);
     if stdout.contains("lantern: rendering on the GPU") {
         // A hardware adapter: the GPU is the default, nothing to say.
         assert!(!stderr.contains("is a software GPU"), "{stderr}");

@@ -149,3 +149,67 @@ pub fn dump(name: &str, width: u32, height: u32, pixels: &[Vec3]) -> PathBuf {
 pub fn exists(rel: &str) -> bool {
     Path::new(&root().join(rel)).exists()
 }
+
+/// A GPU context, or `None` (with a notice) where there is no adapter;
+/// panics instead when `LANTERN_REQUIRE_GPU=1`.
+pub fn gpu() -> Option<lantern::gpu::GpuContext> {
+    match lantern::gpu::GpuContext::new_headless() {
+        Ok(ctx) => {
+            println!("GPU adapter: {}", ctx.describe());
+            Some(ctx)
+        }
+        Err(e) => {
+            if std::env::var("LANTERN_REQUIRE_GPU").is_ok_and(|v| v == "1") {
+                panic!("LANTERN_REQUIRE_GPU=1 but: {e:#}");
+            }
+            eprintln!("notice: skipping GPU test: {e:#}");
+            None
+        }
+    }
+}
+
+/// Variance of an image's mean per channel: pixels are independent, so
+/// the per-pixel variances of the mean add up.
+pub fn variance_of_image_mean(film: &Film) -> Vec3 {
+    let v = film.variance_of_mean();
+    let n = v.len() as f32;
+    v.iter().copied().sum::<Vec3>() / (n * n)
+}
+
+/// Compares a GPU image with a CPU film of the same scene (independent
+/// seeds): image means per channel within 4σ of their difference and
+/// |z| < 3 for at least 97 % of pixel channels; dumps both on failure.
+pub fn compare_backends(label: &str, image: &lantern::gpu::GpuImage, cpu: &Film, timing: &str) {
+    let gpu = image.film();
+    let (a, b) = (gpu.mean(), cpu.mean());
+    let cmp = compare(
+        &a,
+        &gpu.variance_of_mean(),
+        &b,
+        &cpu.variance_of_mean(),
+        3.0,
+    );
+    let sigma = (variance_of_image_mean(&gpu) + variance_of_image_mean(cpu)).powf(0.5);
+    let diff = cmp.mean_a - cmp.mean_b;
+    let z_means = diff / sigma.max(Vec3::splat(1e-12));
+    let single_gpu = image_mean(&image.single_mean());
+    println!(
+        "{label}: GPU mean {:.5?} CPU mean {:.5?} (Δ/σ {:.2?}); GPU single {:.5?}; per-pixel |z|<3: {:.4}; {timing}",
+        cmp.mean_a.to_array(),
+        cmp.mean_b.to_array(),
+        z_means.to_array(),
+        single_gpu.to_array(),
+        cmp.z_pass_fraction,
+    );
+    let ok = z_means.abs().max_element() < 4.0 && cmp.z_pass_fraction >= 0.97;
+    if !ok {
+        let name = label.replace(['/', ' ', '²', '×'], "_");
+        let pa = dump(&format!("{name}_gpu"), image.width, image.height, &a);
+        let pb = dump(&format!("{name}_cpu"), image.width, image.height, &b);
+        panic!(
+            "{label}: GPU and CPU disagree: {cmp:?}, Δ/σ {z_means}; images in {} and {}",
+            pa.display(),
+            pb.display()
+        );
+    }
+}
