@@ -48,8 +48,10 @@
 //! internal-light term `L₁` uses `Ĵ` in place of `J` for the same reason.
 //!
 //! The optical depth along a straight flight is integrated by the midpoint
-//! rule on a lattice of step `cell / 8` (the smallest extent of a majorant
-//! cell), anchored at the start of each flight and of each majorant cell:
+//! rule on a lattice of step `cell / 2` (`cell`: the smallest extent of a
+//! majorant cell), anchored at the start of each flight (in a lazy flight,
+//! [`optical_depth_flight`], at each tentative collision) and of each
+//! majorant cell:
 //! exact for densities that are constant in each majorant cell, and
 //! second-order accurate otherwise. The clock is that quadrature; the
 //! collisions themselves come from spectral tracking against the true `c`,
@@ -61,7 +63,7 @@ use super::lights::Lights;
 use super::phase;
 use super::reference::single_scatter_source;
 use super::rng::Rng;
-use super::tracking::free_flight;
+use super::tracking::{free_flight, sample_tentative, spectral_event, TentativeEvent};
 use super::volume::{DensityField, Volume};
 
 /// What the walk's clock counts between gates.
@@ -292,6 +294,109 @@ pub fn estimate_j<D: DensityField>(
     out
 }
 
+/// The optical depth to the next gate above which a flight marches its
+/// clock lazily ([`optical_depth_flight`]); below it, marching to the gate
+/// first and again to the collision is cheaper than a march per tentative
+/// collision (measured on the chromatic sphere at `s* = 0.5`, where the
+/// lazy march alone was 4 % slower, and on the puffs at their default
+/// `s* = 1.6`, where it was 1.4× faster).
+const LAZY_CLOCK_MIN_BUDGET: f32 = 1.0;
+
+/// How one flight of a walk ends.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Flight {
+    /// A real collision at ray parameter `t`, the clock having advanced by
+    /// `advanced` since the flight's start.
+    Collision { t: f32, advanced: f32 },
+    /// The clock reached the next gate at ray parameter `t` first.
+    Gate(f32),
+    /// The flight left the box (or can carry no more light) first.
+    Exit,
+}
+
+/// One flight with the optical-depth clock over `[t_enter, t_exit]` of
+/// `origin + t dir`: spectral tracking's tentative collisions in order,
+/// the clock marched from each to the next (so only as far as the flight
+/// goes, where marching to the gate first and then again to the collision
+/// marched about twice as far: 75 % of the re-sampling time went to
+/// the clock), stopping at the gate (`budget` of clock) if it comes before
+/// the next tentative collision. Tentative collisions past the gate are
+/// never drawn into the weight, so this is the same estimator as tracking
+/// to the gate: flights are memoryless. The clock's midpoint lattice is
+/// anchored at each tentative collision instead of the flight's start (the
+/// same order of accuracy).
+#[allow(clippy::too_many_arguments)] // one flight: ray, span, budget, state
+fn optical_depth_flight<D: DensityField>(
+    vol: &Volume<D>,
+    origin: Vec3,
+    dir: Vec3,
+    t_enter: f32,
+    t_exit: f32,
+    budget: f32,
+    weight: &mut Vec3,
+    rng: &mut Rng,
+) -> Flight {
+    let mut clock = 0.0f32;
+    let mut t_prev = t_enter;
+    let mut outcome = None;
+    sample_tentative(
+        &vol.majorants,
+        origin,
+        dir,
+        t_enter,
+        t_exit,
+        rng,
+        |t, m, rng| {
+            match march_clock(
+                vol,
+                Clock::OpticalDepth,
+                origin,
+                dir,
+                t_prev,
+                t_exit,
+                t,
+                budget - clock,
+            ) {
+                ClockMarch::Reached(t_gate) => {
+                    outcome = Some(Flight::Gate(t_gate));
+                    return false;
+                }
+                ClockMarch::Exhausted(d) => {
+                    clock += d;
+                    t_prev = t;
+                }
+            }
+            match spectral_event(vol, origin + dir * t, m, weight, rng) {
+                TentativeEvent::Real => {
+                    outcome = Some(Flight::Collision { t, advanced: clock });
+                    false
+                }
+                TentativeEvent::Null => true,
+                TentativeEvent::Dead => {
+                    outcome = Some(Flight::Exit);
+                    false
+                }
+            }
+        },
+    );
+    outcome.unwrap_or_else(|| {
+        // No collision before the exit: is there a gate on the rest?
+        match march_clock(
+            vol,
+            Clock::OpticalDepth,
+            origin,
+            dir,
+            t_prev,
+            t_exit,
+            t_exit,
+            budget - clock,
+        ) {
+            ClockMarch::Reached(t_gate) => Flight::Gate(t_gate),
+            ClockMarch::Exhausted(_) => Flight::Exit,
+        }
+    })
+}
+
 /// The walk itself. `on_gate` also receives the random stream, so that the
 /// caller can trace shadow rays; `on_collision(clock)` is called at every
 /// real collision with the clock's value there (a hook for tests).
@@ -339,36 +444,48 @@ fn walk<D: DensityField>(
         }
         let gate_clock = next as f32 * s_star;
         let budget = gate_clock - clock_at_enter;
-        let march = march_clock(
-            vol,
-            settings.clock,
-            origin,
-            dir,
-            t_enter,
-            t_exit,
-            t_exit,
-            budget,
-        );
-        let gate_t = match march {
-            ClockMarch::Reached(t) => Some(t),
-            ClockMarch::Exhausted(_) => None,
-        };
-        let flight_end = gate_t.unwrap_or(t_exit);
-        match free_flight(vol, origin, dir, t_enter, flight_end, &mut weight, rng) {
-            Some(t_hit) => {
-                let advanced = match march_clock(
+        let flight = match settings.clock {
+            Clock::OpticalDepth if budget > LAZY_CLOCK_MIN_BUDGET => {
+                optical_depth_flight(vol, origin, dir, t_enter, t_exit, budget, &mut weight, rng)
+            }
+            _ => {
+                let gate_t = match march_clock(
                     vol,
                     settings.clock,
                     origin,
                     dir,
                     t_enter,
                     t_exit,
-                    t_hit,
-                    f32::INFINITY,
+                    t_exit,
+                    budget,
                 ) {
-                    ClockMarch::Reached(_) => 0.0,
-                    ClockMarch::Exhausted(d) => d,
+                    ClockMarch::Reached(t) => Some(t),
+                    ClockMarch::Exhausted(_) => None,
                 };
+                let flight_end = gate_t.unwrap_or(t_exit);
+                match free_flight(vol, origin, dir, t_enter, flight_end, &mut weight, rng) {
+                    Some(t_hit) => Flight::Collision {
+                        t: t_hit,
+                        advanced: match march_clock(
+                            vol,
+                            settings.clock,
+                            origin,
+                            dir,
+                            t_enter,
+                            t_exit,
+                            t_hit,
+                            f32::INFINITY,
+                        ) {
+                            ClockMarch::Reached(_) => 0.0,
+                            ClockMarch::Exhausted(d) => d,
+                        },
+                    },
+                    None => gate_t.map_or(Flight::Exit, Flight::Gate),
+                }
+            }
+        };
+        match flight {
+            Flight::Collision { t: t_hit, advanced } => {
                 // Rounding must not put the collision past the gate.
                 clock_at_origin = (clock_at_enter + advanced).min(gate_clock);
                 origin += dir * t_hit;
@@ -384,15 +501,11 @@ fn walk<D: DensityField>(
                 }
                 dir = phase::sample_hg(vol.optics.g, dir, rng.next_f32(), rng.next_f32());
             }
-            None => {
+            Flight::Exit => return,
+            Flight::Gate(t) => {
                 if weight == Vec3::ZERO {
                     return;
                 }
-                // No gate before the exit: the walk left the box, and
-                // nothing comes back from the vacuum outside it.
-                let Some(t) = gate_t else {
-                    return;
-                };
                 origin += dir * t;
                 on_gate(next, weight, origin, -dir, rng);
                 if next == last {

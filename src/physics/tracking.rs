@@ -67,26 +67,63 @@ pub fn free_flight<D: DensityField>(
     rng: &mut Rng,
 ) -> Option<f32> {
     let mut hit = None;
-    sample_tentative(&vol.majorants, origin, dir, t0, t1, rng, |t, m, rng| {
-        let sigma_t = vol.sigma_t(origin + dir * t);
-        let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
-        let p_real = (*weight * sigma_t).max_element();
-        let p_null = (*weight * sigma_n).max_element();
-        let total = p_real + p_null;
-        if total <= 0.0 {
-            *weight = Vec3::ZERO;
-            return false;
-        }
-        if rng.next_f32() * total < p_real {
-            *weight *= sigma_t * (total / (m * p_real));
-            hit = Some(t);
-            false
-        } else {
-            *weight *= sigma_n * (total / (m * p_null));
-            true
-        }
-    });
+    sample_tentative(
+        &vol.majorants,
+        origin,
+        dir,
+        t0,
+        t1,
+        rng,
+        |t, m, rng| match spectral_event(vol, origin + dir * t, m, weight, rng) {
+            TentativeEvent::Real => {
+                hit = Some(t);
+                false
+            }
+            TentativeEvent::Null => true,
+            TentativeEvent::Dead => false,
+        },
+    );
     hit
+}
+
+/// What spectral tracking made of a tentative collision.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TentativeEvent {
+    /// A real collision (the weight was updated).
+    Real,
+    /// A null collision: the flight goes on (the weight was updated).
+    Null,
+    /// The path can carry no more light (the weight was set to zero).
+    Dead,
+}
+
+/// Spectral tracking's choice at a tentative collision at `p` under the
+/// majorant `m`: real with probability `p_real / (p_real + p_null)`, the
+/// weight updated so that the estimate stays unbiased per channel.
+#[inline]
+pub fn spectral_event<D: DensityField>(
+    vol: &Volume<D>,
+    p: Vec3,
+    m: f32,
+    weight: &mut Vec3,
+    rng: &mut Rng,
+) -> TentativeEvent {
+    let sigma_t = vol.sigma_t(p);
+    let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
+    let p_real = (*weight * sigma_t).max_element();
+    let p_null = (*weight * sigma_n).max_element();
+    let total = p_real + p_null;
+    if total <= 0.0 {
+        *weight = Vec3::ZERO;
+        return TentativeEvent::Dead;
+    }
+    if rng.next_f32() * total < p_real {
+        *weight *= sigma_t * (total / (m * p_real));
+        TentativeEvent::Real
+    } else {
+        *weight *= sigma_n * (total / (m * p_null));
+        TentativeEvent::Null
+    }
 }
 
 /// Ratio-tracking estimate of the transmittance `T` from `origin` along
