@@ -22,7 +22,7 @@
 //! are read back (a few MiB) and the CPU's [`InternalLights::assemble`]
 //! builds the kernel radius and the spatial indices.
 //!
-//! The scene's bindings 0–4 are those of [`SceneBuffers`] (shared with the
+//! The scene's bindings 0–4 are those of `SceneBuffers` (shared with the
 //! renderers); this module's own buffers are at bindings 5–8.
 
 use std::time::Instant;

@@ -50,7 +50,7 @@
 //! The optical depth along a straight flight is integrated by the midpoint
 //! rule on a lattice of step `cell / 2` (`cell`: the smallest extent of a
 //! majorant cell), anchored at the start of each flight (in a lazy flight,
-//! [`optical_depth_flight`], at each tentative collision) and of each
+//! `optical_depth_flight`, at each tentative collision) and of each
 //! majorant cell:
 //! exact for densities that are constant in each majorant cell, and
 //! second-order accurate otherwise. The clock is that quadrature; the
@@ -295,7 +295,7 @@ pub fn estimate_j<D: DensityField>(
 }
 
 /// The optical depth to the next gate above which a flight marches its
-/// clock lazily ([`optical_depth_flight`]); below it, marching to the gate
+/// clock lazily (`optical_depth_flight`); below it, marching to the gate
 /// first and again to the collision is cheaper than a march per tentative
 /// collision (measured on the chromatic sphere at `s* = 0.5`, where the
 /// lazy march alone was 4 % slower, and on the puffs at their default
