@@ -336,6 +336,20 @@ fn optical_depth_flight<D: DensityField>(
     weight: &mut Vec3,
     rng: &mut Rng,
 ) -> Flight {
+    // The clock from `from` to `to` (lattice anchored at `from`) against
+    // what is left of the budget.
+    let march = |from: f32, to: f32, left: f32| {
+        march_clock(
+            vol,
+            Clock::OpticalDepth,
+            origin,
+            dir,
+            from,
+            t_exit,
+            to,
+            left,
+        )
+    };
     let mut clock = 0.0f32;
     let mut t_prev = t_enter;
     let mut outcome = None;
@@ -347,16 +361,7 @@ fn optical_depth_flight<D: DensityField>(
         t_exit,
         rng,
         |t, m, rng| {
-            match march_clock(
-                vol,
-                Clock::OpticalDepth,
-                origin,
-                dir,
-                t_prev,
-                t_exit,
-                t,
-                budget - clock,
-            ) {
+            match march(t_prev, t, budget - clock) {
                 ClockMarch::Reached(t_gate) => {
                     outcome = Some(Flight::Gate(t_gate));
                     return false;
@@ -379,21 +384,10 @@ fn optical_depth_flight<D: DensityField>(
             }
         },
     );
-    outcome.unwrap_or_else(|| {
-        // No collision before the exit: is there a gate on the rest?
-        match march_clock(
-            vol,
-            Clock::OpticalDepth,
-            origin,
-            dir,
-            t_prev,
-            t_exit,
-            t_exit,
-            budget - clock,
-        ) {
-            ClockMarch::Reached(t_gate) => Flight::Gate(t_gate),
-            ClockMarch::Exhausted(_) => Flight::Exit,
-        }
+    // No collision before the exit: is there a gate on the rest?
+    outcome.unwrap_or_else(|| match march(t_prev, t_exit, budget - clock) {
+        ClockMarch::Reached(t_gate) => Flight::Gate(t_gate),
+        ClockMarch::Exhausted(_) => Flight::Exit,
     })
 }
 
