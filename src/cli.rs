@@ -468,13 +468,19 @@ fn render_command(
         mean.z,
         out.display()
     );
-    let s = single.image_mean();
-    let rest = mean - s;
+    print_parts(mean, single.image_mean(), method);
+    Ok(())
+}
+
+/// Prints the image mean split into single scatter and the rest (multiple
+/// scatter for the reference, the internal-light part otherwise).
+fn print_parts(mean: glam::Vec3, single: glam::Vec3, method: Method) {
+    let rest = mean - single;
     println!(
         "  single scatter mean {:.5} {:.5} {:.5}; {} mean {:.5} {:.5} {:.5}",
-        s.x,
-        s.y,
-        s.z,
+        single.x,
+        single.y,
+        single.z,
         match method {
             Method::Reference => "multiple scatter",
             Method::Internal => "internal-light part",
@@ -483,7 +489,6 @@ fn render_command(
         rest.y,
         rest.z
     );
-    Ok(())
 }
 
 /// A spinner-less progress bar over `spp` passes.
@@ -562,20 +567,7 @@ fn render_gpu(
         mean.z,
         out.display()
     );
-    let rest = mean - single;
-    println!(
-        "  single scatter mean {:.5} {:.5} {:.5}; {} mean {:.5} {:.5} {:.5}",
-        single.x,
-        single.y,
-        single.z,
-        match settings.method {
-            Method::Reference => "multiple scatter",
-            Method::Internal => "internal-light part",
-        },
-        rest.x,
-        rest.y,
-        rest.z
-    );
+    print_parts(mean, single, settings.method);
     Ok(())
 }
 

@@ -275,10 +275,7 @@ fn agree(scene: &str, side: u32, spp: u32) {
     let t = Instant::now();
     let mut renderer =
         GpuRenderer::reference(&ctx, &prepared, 2).unwrap_or_else(|e| panic!("{e:#}"));
-    for pass in 0..spp {
-        renderer.add_pass(pass);
-    }
-    let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+    let image = common::gpu_render(&mut renderer, spp);
     let gpu_secs = t.elapsed().as_secs_f64();
     assert_eq!(image.samples, spp);
     common::compare_backends(
@@ -307,34 +304,18 @@ fn agree_gather(scene: &str, clock: ClockKind, l1: L1Kind, side: u32, spp: u32) 
     settings.method = Method::Internal;
     settings.internal.clock = clock;
     settings.internal.l1 = l1;
-    let never = AtomicBool::new(false);
     let t = Instant::now();
-    let cache = Arc::new(
-        InternalLights::build(
-            &prepared.volume,
-            &prepared.lights,
-            &internal_params(&prepared, &settings),
-            &never,
-        )
-        .unwrap(),
-    );
+    let cache = common::build_lights(&prepared, &settings);
     let build_secs = t.elapsed().as_secs_f64();
     let t = Instant::now();
     settings.seed = 1;
-    let cpu_renderer = Renderer::with_lights(prepared.clone(), &settings, Some(cache.clone()));
-    let mut cpu = Film::new(side, side);
-    for pass in 0..spp * CPU_SPP_PER_GPU_SPP {
-        cpu.add_pass(&cpu_renderer.pass(pass, &never).unwrap().total);
-    }
+    let cpu = common::gather_cpu(&prepared, &settings, &cache, spp * CPU_SPP_PER_GPU_SPP);
     let cpu_secs = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let mut renderer =
         GpuRenderer::internal(&ctx, &prepared, &cache, settings.internal.light_samples, 2)
             .unwrap_or_else(|e| panic!("{e:#}"));
-    for pass in 0..spp {
-        renderer.add_pass(pass);
-    }
-    let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+    let image = common::gpu_render(&mut renderer, spp);
     let gpu_secs = t.elapsed().as_secs_f64();
     common::compare_backends(
         &format!(

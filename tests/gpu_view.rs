@@ -23,6 +23,7 @@ use glam::Vec3;
 use lantern::gpu::display::{read_texture, DisplayMode, DisplayPass, DisplaySettings};
 use lantern::gpu::mirrors::GpuAccum;
 use lantern::gpu::GpuContext;
+use lantern::render::film::image_mean;
 use lantern::render::tonemap::{to_srgb8, ViewTransform};
 use lantern::scene::Scene;
 use lantern::ui::backend::{Backend, Estimator, Job, Snapshot, Worker};
@@ -279,11 +280,6 @@ fn render_with(worker: &mut Worker, job: Job) -> (Arc<Snapshot>, Vec<String>) {
         );
         std::thread::sleep(Duration::from_millis(10));
     }
-}
-
-/// Image mean per channel.
-fn image_mean(v: &[Vec3]) -> Vec3 {
-    v.iter().copied().sum::<Vec3>() / v.len().max(1) as f32
 }
 
 /// The worker on the GPU backend against the worker on the CPU backend:

@@ -129,10 +129,7 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
     let t = Instant::now();
     let mut renderer =
         GpuRenderer::reference(&ctx, &prepared, 2).unwrap_or_else(|e| panic!("{e:#}"));
-    for pass in 0..spp {
-        renderer.add_pass(pass);
-    }
-    let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+    let image = common::gpu_render(&mut renderer, spp);
     let gpu_mib = renderer.gpu_bytes() as f64 / (1024.0 * 1024.0);
     println!(
         "GPU reference {spp} spp in {:.2} s (upload included), {gpu_mib:.0} MiB on the GPU",
@@ -149,10 +146,7 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
     let mut renderer =
         GpuRenderer::internal(&ctx, &prepared, &cache, settings.internal.light_samples, 2)
             .unwrap_or_else(|e| panic!("{e:#}"));
-    for pass in 0..spp {
-        renderer.add_pass(pass);
-    }
-    let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+    let image = common::gpu_render(&mut renderer, spp);
     println!(
         "GPU gather {spp} spp in {:.2} s (upload included); single {:?}; peak RSS {:.0} MiB",
         t.elapsed().as_secs_f64(),

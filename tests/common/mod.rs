@@ -213,3 +213,11 @@ pub fn compare_backends(label: &str, image: &lantern::gpu::GpuImage, cpu: &Film,
         );
     }
 }
+
+/// Adds `spp` passes (0..spp) on the GPU and reads the image back.
+pub fn gpu_render(renderer: &mut lantern::gpu::GpuRenderer, spp: u32) -> lantern::gpu::GpuImage {
+    for pass in 0..spp {
+        renderer.add_pass(pass);
+    }
+    renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"))
+}
