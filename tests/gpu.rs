@@ -234,7 +234,10 @@ fn mirrors_match_wgsl_layout() {
             cluster_power_offset,
             light_power_offset,
             live_offset,
-            l1_form
+            l1_form,
+            scattered_offset,
+            n_terms,
+            _pad
         ]
     );
 }
@@ -398,8 +401,9 @@ fn gather_agrees_thin_sphere_point_lights() {
 //   a density off by a 10 % uniform mix; positions inside the box, `ρ(x_i)`
 //   and `V_i = 1/(M p(x_i))` against the CPU's `p` to 1e-3.
 // - Per-light walks agree with the CPU's at the same positions: for each
-//   light the mean of `F`, of the multiply scattered part of `J`, its three
-//   l = 1 SH coefficients, the arriving light, and the per-term energies
+//   light the mean of `F`, of the multiply scattered part of `J` and of
+//   what of it the walks carried through a collision, its three l = 1 SH
+//   coefficients, the arriving light, and the per-term energies
 //   `E_k`, each as a z-test with the per-walk (per-estimate) variance of
 //   the CPU's walks; |z| < 3 for at least 95 % of light channels (64
 //   lights, channels of grey scenes count thrice: at most three lights
@@ -411,7 +415,7 @@ fn gather_agrees_thin_sphere_point_lights() {
 //   within the spread of image means between light sets.
 
 use lantern::gpu::walks::{build_internal_lights_gpu, place_lights_gpu};
-use lantern::physics::gated_walk::{accumulate_j_from, GateSettings};
+use lantern::physics::gated_walk::{accumulate_j_split, GateSettings};
 use lantern::physics::internal::{InternalParams, PLACEMENT_RESOLUTION};
 use lantern::physics::placement::PlacementDensity;
 use lantern::physics::reference::RR_START_DEPTH;
@@ -573,11 +577,13 @@ impl Moments {
 }
 
 /// The CPU's walks at one light: per walk (uniform random directions), F,
-/// the multiply scattered part, its l = 1 SH coefficients (×4π), each term;
-/// and per estimate the arriving light.
+/// the multiply scattered part, what of it the walk carried through a
+/// collision, its l = 1 SH coefficients (×4π), each term; and per estimate
+/// the arriving light.
 struct CpuLight {
     f: Moments,
     multi: Moments,
+    scattered: Moments,
     sh1: [Moments; 3],
     terms: Vec<Moments>,
     arrival: Vec<Moments>,
@@ -602,6 +608,7 @@ fn cpu_walks(
     let mut out = CpuLight {
         f: Moments::default(),
         multi: Moments::default(),
+        scattered: Moments::default(),
         sh1: [Moments::default(); 3],
         terms: vec![Moments::default(); terms + 1],
         arrival: Vec::new(),
@@ -615,6 +622,7 @@ fn cpu_walks(
     });
     let four_pi = 4.0 * std::f32::consts::PI;
     let mut per_walk = vec![Vec3::ZERO; terms + 1];
+    let mut unscattered = vec![Vec3::ZERO; terms + 1];
     let mut y = [0.0f32; 25];
     for _ in 0..walks {
         let z = 1.0 - 2.0 * rng.next_f32();
@@ -622,10 +630,23 @@ fn cpu_walks(
         let s = (1.0 - z * z).max(0.0).sqrt();
         let n = Vec3::new(s * phi.cos(), s * phi.sin(), z);
         per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
-        accumulate_j_from(vol, lights, x, n, &gate, 1, &mut rng, &mut per_walk);
+        unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
+        accumulate_j_split(
+            vol,
+            lights,
+            x,
+            n,
+            &gate,
+            1,
+            &mut rng,
+            &mut per_walk,
+            &mut unscattered,
+        );
         let total: Vec3 = per_walk[1..].iter().sum();
         out.f.add(per_walk.get(1).copied().unwrap_or(Vec3::ZERO));
         out.multi.add(total);
+        out.scattered
+            .add(total - unscattered[1..].iter().sum::<Vec3>());
         sh_basis(1, n, &mut y);
         for c in 0..3 {
             out.sh1[c].add(total * y[c + 1] * four_pi);
@@ -710,7 +731,8 @@ fn walks_case(
     let t = Instant::now();
     let mut verdicts = Vec::new();
     for (label, v) in [("CPU", vol), ("CPU with albedo × 0.9", &wrong_vol)] {
-        let (mut f, mut multi, mut sh1, mut arrival) = (
+        let (mut f, mut multi, mut scattered, mut sh1, mut arrival) = (
+            ZStats::default(),
             ZStats::default(),
             ZStats::default(),
             ZStats::default(),
@@ -732,6 +754,11 @@ fn walks_case(
             f.add(built.mean_f(i), cpu.f.mean(), cpu.f.var() * scale);
             let multi_gpu = built.multi_coefficients(i)[0] * y00;
             multi.add(multi_gpu, cpu.multi.mean(), cpu.multi.var() * scale);
+            scattered.add(
+                built.scattered_coefficients(i)[0] * y00,
+                cpu.scattered.mean(),
+                cpu.scattered.var() * scale,
+            );
             for c in 0..3 {
                 sh1.add(
                     built.multi_coefficients(i)[c + 1],
@@ -756,6 +783,7 @@ fn walks_case(
         let stats = [
             ("mean F", &f),
             ("mean J (multiple)", &multi),
+            ("mean J (after a collision)", &scattered),
             ("SH l=1", &sh1),
             ("arrival", &arrival),
             ("E_k", &energy_z),

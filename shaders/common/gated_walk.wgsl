@@ -106,14 +106,21 @@ fn march_clock(
     return ClockMarch(acc, false);
 }
 
+// The sum over gates of what `accumulate_j_from` added before the walk's
+// first collision (`accumulate_j_split`'s `unscattered`, summed over k):
+// reset at the start of each walk.
+var<private> walk_unscattered: vec3<f32>;
+
 // One gate of `accumulate_j_from` (its `on_gate` closure): adds
 // `w · α σ_t · ρ · (S₁/b)(z_k, n_k)` to term `k`, with `ρ = ρ(z_k)` for the
-// geometric clock and `ρ(z)` for the optical-depth clock.
+// geometric clock and `ρ(z)` for the optical-depth clock, and to
+// `walk_unscattered` too if the walk has not collided yet.
 fn gate_add(
     k: u32,
     w: vec3<f32>,
     zk: vec3<f32>,
     nk: vec3<f32>,
+    scattered: bool,
     settings: GateSettings,
     first: u32,
     rho_z: f32,
@@ -129,7 +136,11 @@ fn gate_add(
     }
     let scatter = scene.medium.albedo * scene.medium.sigma_t;
     let source = single_scatter_source(zk, nk, rng);
-    (*out)[k] += w * scatter * rho * source;
+    let v = w * scatter * rho * source;
+    (*out)[k] += v;
+    if !scattered {
+        walk_unscattered += v;
+    }
 }
 
 // Adds one walk's estimate of `Ĵ_k(z, n)`, `k = first..=N`, to `out`
@@ -137,6 +148,7 @@ fn gate_add(
 // from `z` along `−n` by spectral tracking, albedo and Russian roulette at
 // real collisions, phase-sampled directions, gates at clock `k s*`; leaving
 // the box ends it. `settings.n_terms` must be below `GPU_MAX_GATES`.
+// `walk_unscattered` receives the part added before the first collision.
 fn accumulate_j_from(
     z: vec3<f32>,
     n: vec3<f32>,
@@ -145,6 +157,7 @@ fn accumulate_j_from(
     rng: ptr<function, Rng>,
     out: ptr<function, GateTerms>,
 ) {
+    walk_unscattered = vec3<f32>(0.0);
     let rho_z = density(z);
     if settings.clock == CLOCK_OPTICAL_DEPTH && rho_z <= 0.0 {
         return;
@@ -153,7 +166,7 @@ fn accumulate_j_from(
     let s_star = max(settings.s_star, 0.0);
     let last = min(settings.n_terms, GPU_MAX_GATES - 1u);
     var weight = vec3<f32>(1.0);
-    gate_add(0u, weight, z, n, settings, first, rho_z, rng, out);
+    gate_add(0u, weight, z, n, false, settings, first, rho_z, rng, out);
     if last == 0u {
         return;
     }
@@ -178,7 +191,7 @@ fn accumulate_j_from(
         // and only for the geometric clock).
         while geometric && f32(next) * s_star <= clock_at_enter {
             let t = f32(next) * s_star - clock_at_origin;
-            gate_add(next, weight, origin + dir * t, -dir, settings, first, rho_z, rng, out);
+            gate_add(next, weight, origin + dir * t, -dir, collisions > 0u, settings, first, rho_z, rng, out);
             if next == last {
                 return;
             }
@@ -231,7 +244,7 @@ fn accumulate_j_from(
                 return;
             }
             origin += dir * march.value;
-            gate_add(next, weight, origin, -dir, settings, first, rho_z, rng, out);
+            gate_add(next, weight, origin, -dir, collisions > 0u, settings, first, rho_z, rng, out);
             if next == last {
                 return;
             }

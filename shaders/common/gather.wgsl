@@ -4,9 +4,12 @@
 // jittered point `y` each (transmittance `T(x, y)` by ratio tracking):
 //
 // - `single`: the k = 0 part of L₀, `∫ T b S₁ dt`, a marched single
-//   scatter with `S₁(y)` by next-event estimation at every point.
-// - `reconstructed`: the k ≥ 1 part of L₀, `∫ T Ĵ dt` with `Ĵ` the kernel
-//   reconstruction (`reconstruct_multi`).
+//   scatter with `S₁(y)` by next-event estimation at every point, and the
+//   unscattered part of the k ≥ 1 terms, the same march on the rest of
+//   the ray up to a clock of `(N+1) s*` (`single_beyond_window`).
+// - `reconstructed`: the rest of the k ≥ 1 part of L₀, `∫ T Ĵ dt` with `Ĵ`
+//   the kernel reconstruction of what the walks carried through a
+//   collision (`reconstruct_multi` at `scattered_offset`).
 // - `internal`: L₁, in the form `gather_params.l1_form` says:
 //   - field (`L1_FIELD`, default): at each point `y`, one scattering of
 //     the reconstructed field `J = S₁ + Ĵ` at `x' = y − r n'`, `n'` drawn
@@ -61,6 +64,46 @@ fn cluster_weight(c: u32, x: vec3<f32>, dir: vec3<f32>, window: f32, h2: f32) ->
     return power / (d * d + h2);
 }
 
+// The unscattered part of L₀'s k ≥ 1 terms, the single scatter on the rest
+// of the ray up to a clock of `(N+1) s*`, marched at `samples` stratified
+// points (`single_beyond_window`).
+fn single_beyond_window(
+    x: vec3<f32>,
+    dir: vec3<f32>,
+    window: f32,
+    len: f32,
+    samples: u32,
+    rng: ptr<function, Rng>,
+) -> vec3<f32> {
+    let terms = gather_params.n_terms;
+    if terms == 0u || window >= len {
+        return vec3<f32>(0.0);
+    }
+    let budget = gather_params.s_star * f32(terms + 1u);
+    let em = march_clock(gather_params.clock, x, dir, 0.0, len, len, budget);
+    let end = select(len, em.value, em.reached);
+    if end <= window {
+        return vec3<f32>(0.0);
+    }
+    let n = -dir;
+    let step = (end - window) / f32(samples);
+    var sum = vec3<f32>(0.0);
+    for (var j = 0u; j < samples; j++) {
+        let t = window + (f32(j) + rng_next_f32(rng)) * step;
+        let y = x + dir * t;
+        let rho = density(y);
+        if rho <= 0.0 {
+            continue;
+        }
+        let s1 = gather_params.scatter * rho * single_scatter_source(y, n, rng);
+        if all(s1 == vec3<f32>(0.0)) {
+            continue;
+        }
+        sum += transmittance(x, dir, t, rng) * s1 * step;
+    }
+    return sum;
+}
+
 // One estimate of `L₀ + L₁` for the camera ray `eye + t dir` with
 // `samples` stratified points and internal-light samples (`gather`).
 fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rng>) -> GatherSample {
@@ -90,7 +133,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         let t = (f32(j) + rng_next_f32(rng)) * step;
         let y = x + dir * t;
         let rho = density(y);
-        let j_hat = reconstruct_multi(y, n, rho);
+        let j_hat = reconstruct_multi(y, n, rho, gather_params.scattered_offset);
         var s1 = vec3<f32>(0.0);
         var l1 = vec3<f32>(0.0);
         if rho > 0.0 {
@@ -107,6 +150,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         out.internal += tr * l1 * step;
         out.single += tr * s1 * step;
     }
+    out.single += single_beyond_window(x, dir, window, len, samples, rng);
     if field {
         return out;
     }
@@ -280,7 +324,7 @@ fn field_l1_at(
     let r = rng_next_f32(rng) * r_max;
     let xp = y + back * r;
     let rho = density(xp);
-    var jv = reconstruct_multi(xp, travel, rho);
+    var jv = reconstruct_multi(xp, travel, rho, gather_params.multi_offset);
     if rho > 0.0 {
         jv += gather_params.scatter * rho * single_scatter_source(xp, travel, rng);
     }

@@ -34,11 +34,13 @@ fn eval_s1(i: u32, n: vec3<f32>) -> vec3<f32> {
     return sum * gather_params.scatter * light.density;
 }
 
-// Light `i`'s SH series of the multiply scattered part of `J_i` for the
-// basis values `y`, unclamped (`eval_sh` of the light's coefficients).
-fn eval_sh(i: u32, y: ptr<function, array<f32, 25>>) -> vec3<f32> {
+// Light `i`'s SH series for the basis values `y`, unclamped (`eval_sh` of
+// the light's coefficients in the table at `offset`: `multi_offset` for the
+// multiply scattered part of `J_i`, `scattered_offset` for what of it the
+// walks carried through a collision).
+fn eval_sh(offset: u32, i: u32, y: ptr<function, array<f32, 25>>) -> vec3<f32> {
     let count = gather_params.sh_count;
-    let base = gather_params.multi_offset + i * count;
+    let base = offset + i * count;
     var sum = vec3<f32>(0.0);
     for (var k = 0u; k < count; k++) {
         sum += internal_vec4[base + k].xyz * (*y)[k];
@@ -49,7 +51,7 @@ fn eval_sh(i: u32, y: ptr<function, array<f32, 25>>) -> vec3<f32> {
 // The multiply scattered part of `J_i` for the basis values `y`, clamped at
 // zero (`eval_multi_with`).
 fn eval_multi_with(i: u32, y: ptr<function, array<f32, 25>>) -> vec3<f32> {
-    return max(eval_sh(i, y), vec3<f32>(0.0));
+    return max(eval_sh(gather_params.multi_offset, i, y), vec3<f32>(0.0));
 }
 
 // `J_i(n)`: `S₁` plus the multiply scattered part (`eval_j`).
@@ -72,8 +74,10 @@ fn reconstruction_scale(density_at_p: f32) -> f32 {
 // with `for_each_kernel_weight` and `LightGrid::for_each_near`). The
 // lights' series are summed unclamped and the average is clamped at zero,
 // as on the CPU: clamping each noisy series would bias `Ĵ` upwards where
-// it is small.
-fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32) -> vec3<f32> {
+// it is small. `offset` picks the part (`Part` on the CPU):
+// `gather_params.multi_offset` for all of it (`L₁`), `scattered_offset`
+// for what the walks carried through a collision (`L₀`).
+fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32) -> vec3<f32> {
     let scale_p = reconstruction_scale(density_at_p);
     if scale_p <= 0.0 {
         return vec3<f32>(0.0);
@@ -98,7 +102,7 @@ fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32) -> vec3<f32>
                 let q = dot(d, d) * inv_h2;
                 if q < 1.0 {
                     let w = (1.0 - q) * (1.0 - q);
-                    num += eval_sh(i, &y) * (w * light.recon_scale);
+                    num += eval_sh(offset, i, &y) * (w * light.recon_scale);
                     den += w;
                 }
             }

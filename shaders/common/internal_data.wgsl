@@ -5,8 +5,10 @@
 //
 // - `internal_vec4`: per light two vec4 (position, ρ(x_i); V_i, the
 //   reconstruction scale), then `sh_count` SH coefficients of the multiply
-//   scattered part of J per light, then `external_count` arriving lights
-//   per light (`T E`).
+//   scattered part of J per light (`multi_offset`), then `sh_count` of the
+//   part of it the walks carried through a collision per light
+//   (`scattered_offset`), then `external_count` arriving lights per light
+//   (`T E`).
 // - `internal_words`: the fine grid's `starts` and `ids`, the cluster
 //   grid's `starts` and `ids`, cluster powers and per-slot light powers (f32
 //   bits), and the live clusters; each table at an offset given below.
@@ -43,6 +45,9 @@ struct GatherParams {
     light_power_offset: u32,
     live_offset: u32,
     l1_form: u32,
+    scattered_offset: u32,
+    n_terms: u32,
+    _pad: vec2<u32>,
 }
 
 // The clock tags `CLOCK_*` are in gated_walk.wgsl.

@@ -17,6 +17,7 @@
 //
 // Per light, `walk_out` holds `record_stride` vec4 (xyz used): `sh_count`
 // coefficients of `F`, `sh_count` of the multiply scattered part,
+// `sh_count` of what of it the walks carried through a collision,
 // `external_count` arriving lights, `n_terms + 1` term energies. Keep
 // `WalkParams` in sync with `GpuWalkParams` in src/gpu/mirrors.rs.
 
@@ -96,7 +97,7 @@ fn walk_lights(
     let terms = min(wp.n_terms, GPU_MAX_GATES - 1u);
     let record = i * wp.record_stride;
     let n_ext = light_count();
-    let energy_at = record + 2u * count + n_ext;
+    let energy_at = record + 3u * count + n_ext;
     let scatter = scene.medium.albedo * scene.medium.sigma_t;
 
     var rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_PASS);
@@ -121,15 +122,19 @@ fn walk_lights(
     for (var k = 1u; k <= terms; k++) {
         total += per_walk[k];
     }
+    // What the walk carried through a collision (`walk_unscattered`: the
+    // rest, which the gather marches exactly).
+    let after_collision = total - walk_unscattered;
     var first = vec3<f32>(0.0);
     if terms >= 1u {
         first = per_walk[1];
     }
     let y = sh_basis(wp.sh_order, n);
 
-    // Quantities: F's coefficients, the multiply scattered part's, then the
-    // energies of k = 1..=N (k = 0 comes from the arrival below).
-    let quantities = 2u * count + terms;
+    // Quantities: F's coefficients, the multiply scattered part's, its
+    // collided part's, then the energies of k = 1..=N (k = 0 comes from the
+    // arrival below).
+    let quantities = 3u * count + terms;
     for (var base = 0u; base < quantities; base += ROUND) {
         for (var j = 0u; j < ROUND; j++) {
             let q = base + j;
@@ -138,8 +143,10 @@ fn walk_lights(
                 v = first * (y[q] * w_dir);
             } else if q < 2u * count {
                 v = total * (y[q - count] * w_dir);
+            } else if q < 3u * count {
+                v = after_collision * (y[q - 2u * count] * w_dir);
             } else if q < quantities {
-                v = per_walk[q - 2u * count + 1u] * (volume * w_dir);
+                v = per_walk[q - 3u * count + 1u] * (volume * w_dir);
             }
             partial[lane * ROUND + j] = vec4<f32>(v, 0.0);
         }
@@ -151,8 +158,8 @@ fn walk_lights(
                 sum += partial[l * ROUND + lane].xyz;
             }
             var slot = record + q;
-            if q >= 2u * count {
-                slot = energy_at + 1u + (q - 2u * count);
+            if q >= 3u * count {
+                slot = energy_at + 1u + (q - 3u * count);
             }
             walk_out[slot] += vec4<f32>(sum, 0.0);
         }
@@ -170,7 +177,7 @@ fn walk_lights(
                 t += transmittance(x, -s.travel, s.distance, &rng);
             }
             let arrival = s.irradiance * t / f32(wp.tr_estimates);
-            walk_out[record + 2u * count + l] = vec4<f32>(arrival, 0.0);
+            walk_out[record + 3u * count + l] = vec4<f32>(arrival, 0.0);
             sum += arrival;
         }
         walk_out[energy_at] = vec4<f32>(volume * rho * scatter * sum, 0.0);

@@ -6,7 +6,8 @@
 //! The window of the ray is cut into [`STEPS`] midpoints. At each, the
 //! camera-side transmittance comes from a midpoint quadrature of the
 //! extinction; each light within reach adds its kernel-reconstruction weight
-//! times `J` and its single-scatter term `V_i b P T J / (r² + h²)`, with the
+//! times the part of `J` that `L₀` reconstructs (what the walks carried
+//! through a collision) and its single-scatter term `V_i b P T J / (r² + h²)`, with the
 //! light-side transmittance from a coarser quadrature ([`SHADOW_STEPS`]
 //! points). Luminance-like sums of the RGB parts are normalised to shares.
 //! `L₁`'s part is attributed by the note's point-light form for both
@@ -84,7 +85,7 @@ pub fn light_shares<D: DensityField>(
         let scale_y = cache.reconstruction_scale(rho);
         if den > 0.0 && scale_y > 0.0 {
             for (i, k) in weights {
-                let j = cache.eval_multi_with(i, &basis);
+                let j = cache.eval_scattered_with(i, &basis);
                 share[i] += lum(tr * j) * k * cache.recon_scale[i] * scale_y / den * dt;
             }
         }

@@ -46,6 +46,8 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
     }
     let multi_offset = vec4.len() as u32;
     vec4.extend(cache.multi_coeffs.iter().map(|c| [c.x, c.y, c.z, 0.0]));
+    let scattered_offset = vec4.len() as u32;
+    vec4.extend(cache.scattered_coeffs.iter().map(|c| [c.x, c.y, c.z, 0.0]));
     let arrival_offset = vec4.len() as u32;
     vec4.extend(cache.arrival.iter().map(|c| [c.x, c.y, c.z, 0.0]));
     if vec4.is_empty() {
@@ -108,6 +110,9 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
             L1Form::Field => L1_FIELD,
             L1Form::Points => L1_POINTS,
         },
+        scattered_offset,
+        n_terms: cache.params.terms,
+        _pad: [0; 2],
     };
     PackedLights {
         params,

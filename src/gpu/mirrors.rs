@@ -230,11 +230,18 @@ pub struct GpuGatherParams {
     pub light_power_offset: u32,
     /// Live clusters.
     pub live_offset: u32,
-    /// One of `L1_*`: the form of `L₁` (it takes the place of the padding
-    /// that closed the struct, so the size stays 176 bytes).
+    /// One of `L1_*`: the form of `L₁`.
     pub l1_form: u32,
+    /// Vec4 table offset: the SH coefficients of the part of `J` the
+    /// walks carried through a collision (`L₀`'s reconstruction).
+    pub scattered_offset: u32,
+    /// Series truncation `N` (the marched single scatter beyond the
+    /// window reaches a clock of `(N+1) s*`).
+    pub n_terms: u32,
+    /// Padding to a multiple of 16 bytes.
+    pub _pad: [u32; 2],
 }
-const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 176);
+const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 192);
 
 /// The placement grid and mixture of the internal lights
 /// (`PlacementDensity`). Keep in sync with `PlacementParams` in

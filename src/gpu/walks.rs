@@ -138,7 +138,7 @@ pub fn build_internal_lights_gpu(
     }
     // Refuse before any work if the results cannot be bound.
     let n_ext = prepared.lights.suns.len() + prepared.lights.points.len();
-    let stride = 2 * sh_count(params.sh_order.min(MAX_ORDER)) + n_ext + params.terms as usize + 1;
+    let stride = 3 * sh_count(params.sh_order.min(MAX_ORDER)) + n_ext + params.terms as usize + 1;
     ctx.check_storage_size(
         "internal-light walk results",
         params.lights.max(1) as u64 * stride as u64 * 16,
@@ -158,14 +158,16 @@ pub fn build_internal_lights_gpu(
     let gates = params.terms as usize + 1;
     let mut f_coeffs = Vec::with_capacity(m * count);
     let mut multi_coeffs = Vec::with_capacity(m * count);
+    let mut scattered_coeffs = Vec::with_capacity(m * count);
     let mut arrival = Vec::with_capacity(m * n_ext);
     let mut term_energy = vec![Vec3::ZERO; gates];
     let v3 = |v: &[f32; 4]| Vec3::new(v[0], v[1], v[2]);
     for record in out.chunks_exact(stride).take(m) {
         f_coeffs.extend(record[..count].iter().map(v3));
         multi_coeffs.extend(record[count..2 * count].iter().map(v3));
-        arrival.extend(record[2 * count..2 * count + n_ext].iter().map(v3));
-        for (e, v) in term_energy.iter_mut().zip(&record[2 * count + n_ext..]) {
+        scattered_coeffs.extend(record[2 * count..3 * count].iter().map(v3));
+        arrival.extend(record[3 * count..3 * count + n_ext].iter().map(v3));
+        for (e, v) in term_energy.iter_mut().zip(&record[3 * count + n_ext..]) {
             *e += v3(v);
         }
     }
@@ -176,6 +178,7 @@ pub fn build_internal_lights_gpu(
         lights,
         f_coeffs,
         multi_coeffs,
+        scattered_coeffs,
         arrival,
         term_energy,
         build.density_integral,
@@ -360,7 +363,7 @@ fn walk(
     let order = params.sh_order.min(MAX_ORDER);
     let count = sh_count(order) as u32;
     let n_ext = (prepared.lights.suns.len() + prepared.lights.points.len()) as u32;
-    let stride = 2 * count + n_ext + params.terms + 1;
+    let stride = 3 * count + n_ext + params.terms + 1;
     let walks = params.walks.max(1);
     let out_bytes = build.light_count as u64 * stride as u64 * 16;
     ctx.check_storage_size("internal-light walk results", out_bytes)?;

@@ -208,7 +208,7 @@ pub fn gated_walk<D: DensityField>(
         n,
         settings,
         rng,
-        |k, w, p, dir, _| on_gate(k, w, p, dir),
+        |k, w, p, dir, _, _| on_gate(k, w, p, dir),
         |_| {},
     );
 }
@@ -245,12 +245,68 @@ pub fn accumulate_j_from<D: DensityField>(
     rng: &mut Rng,
     out: &mut [Vec3],
 ) {
+    let gates = out.len();
+    gate_contributions(vol, lights, z, n, settings, first, gates, rng, |k, v, _| {
+        out[k] += v;
+    });
+}
+
+/// [`accumulate_j_from`], also adding to `unscattered` the part of each
+/// term that the walk carried to its gate without a real collision: the
+/// single scatter `T S₁` from `k s*` further along `−n`, which the final
+/// gather integrates exactly (the marched single scatter beyond the
+/// window) instead of through the lights' spherical harmonics.
+#[allow(clippy::too_many_arguments)] // accumulate_j_from's and one more output
+pub fn accumulate_j_split<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    first: u32,
+    rng: &mut Rng,
+    out: &mut [Vec3],
+    unscattered: &mut [Vec3],
+) {
+    let gates = out.len().min(unscattered.len());
+    gate_contributions(
+        vol,
+        lights,
+        z,
+        n,
+        settings,
+        first,
+        gates,
+        rng,
+        |k, v, scattered| {
+            out[k] += v;
+            if !scattered {
+                unscattered[k] += v;
+            }
+        },
+    );
+}
+
+/// Runs one walk and calls `add(k, Ĵ_k contribution, scattered)` for the
+/// gates `first ≤ k < gates` (`scattered`: the walk collided before it).
+#[allow(clippy::too_many_arguments)] // accumulate_j_from's, with the sink
+fn gate_contributions<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    first: u32,
+    gates: usize,
+    rng: &mut Rng,
+    mut add: impl FnMut(usize, Vec3, bool),
+) {
     let scatter = vol.optics.albedo * vol.optics.sigma_t;
     let rho_z = vol.density.density(z);
     if settings.clock == Clock::OpticalDepth && rho_z <= 0.0 {
         return;
     }
-    let gates = out.len().min(settings.gate_count());
+    let gates = gates.min(settings.gate_count());
     if gates == 0 {
         return;
     }
@@ -264,7 +320,7 @@ pub fn accumulate_j_from<D: DensityField>(
         n,
         &limited,
         rng,
-        |k, w, zk, nk, rng| {
+        |k, w, zk, nk, scattered, rng| {
             let rho = match settings.clock {
                 Clock::Geometric => vol.density.density(zk),
                 Clock::OpticalDepth => rho_z,
@@ -273,7 +329,7 @@ pub fn accumulate_j_from<D: DensityField>(
                 return;
             }
             let source = single_scatter_source(vol, lights, zk, nk, rng);
-            out[k as usize] += w * scatter * rho * source;
+            add(k as usize, w * scatter * rho * source, scattered);
         },
         |_| {},
     );
@@ -391,8 +447,9 @@ fn optical_depth_flight<D: DensityField>(
     })
 }
 
-/// The walk itself. `on_gate` also receives the random stream, so that the
-/// caller can trace shadow rays; `on_collision(clock)` is called at every
+/// The walk itself. `on_gate(k, weight, z_k, n_k, scattered, rng)` also
+/// learns whether the walk has collided yet and receives the random stream,
+/// so that the caller can trace shadow rays; `on_collision(clock)` is called at every
 /// real collision with the clock's value there (a hook for tests).
 fn walk<D: DensityField>(
     vol: &Volume<D>,
@@ -400,13 +457,13 @@ fn walk<D: DensityField>(
     n: Vec3,
     settings: &GateSettings,
     rng: &mut Rng,
-    mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, &mut Rng),
+    mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, bool, &mut Rng),
     mut on_collision: impl FnMut(f32),
 ) {
     let s_star = settings.s_star.max(0.0);
     let last = settings.n_terms;
     let mut weight = Vec3::ONE;
-    on_gate(0, weight, z, n, rng);
+    on_gate(0, weight, z, n, false, rng);
     if last == 0 {
         return;
     }
@@ -430,7 +487,7 @@ fn walk<D: DensityField>(
         // and only for the geometric clock).
         while settings.clock == Clock::Geometric && next as f32 * s_star <= clock_at_enter {
             let t = next as f32 * s_star - clock_at_origin;
-            on_gate(next, weight, origin + dir * t, -dir, rng);
+            on_gate(next, weight, origin + dir * t, -dir, collisions > 0, rng);
             if next == last {
                 return;
             }
@@ -501,7 +558,7 @@ fn walk<D: DensityField>(
                     return;
                 }
                 origin += dir * t;
-                on_gate(next, weight, origin, -dir, rng);
+                on_gate(next, weight, origin, -dir, collisions > 0, rng);
                 if next == last {
                     return;
                 }
@@ -568,7 +625,7 @@ mod tests {
                 Vec3::Z,
                 settings,
                 &mut rng,
-                |_, _, _, _, _| {},
+                |_, _, _, _, _, _| {},
                 |clock| {
                     let k = (clock / s).floor() as usize;
                     if k < per_window.len() {

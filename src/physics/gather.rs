@@ -10,9 +10,15 @@
 //! - **single**: the `k = 0` part of `L₀`, `∫ T b S₁ dt`, with `S₁(y)` by
 //!   next-event estimation to the external lights at each point (a
 //!   marched single scatter: every sample sees the whole window, where one
-//!   collision by free flight sees it with probability `1 − e^{−s*}` only).
-//! - **reconstructed**: the `k ≥ 1` part of `L₀`, `∫ T Ĵ dt` with `Ĵ` the
-//!   kernel reconstruction of [`InternalLights::reconstruct_multi`].
+//!   collision by free flight sees it with probability `1 − e^{−s*}` only);
+//!   and the unscattered part of the `k ≥ 1` terms, the same march over
+//!   the rest of the ray up to a clock of `(N+1) s*` at as many stratified
+//!   points (`J_k` at `y` holds `T S₁` from `k s*` further along the ray;
+//!   over the window these add up to that march).
+//! - **reconstructed**: the rest of the `k ≥ 1` part of `L₀`, `∫ T Ĵ dt`
+//!   with `Ĵ` the kernel reconstruction
+//!   ([`InternalLights::reconstruct_multi`]) of what the walks carried
+//!   through a collision ([`Part::Scattered`]).
 //! - **internal**: `L₁`, one scattering inside the window of light that
 //!   left a source `J` earlier in the window (clock from `x` to `y` plus
 //!   clock from `y` to the source at most `s*`), in one of two forms
@@ -45,7 +51,7 @@
 use glam::Vec3;
 
 use super::gated_walk::{march_clock, Clock, ClockMarch};
-use super::internal::{InternalLights, L1Form};
+use super::internal::{InternalLights, L1Form, Part};
 use super::lights::Lights;
 use super::phase;
 use super::reference::single_scatter_source;
@@ -91,6 +97,56 @@ fn clock_to<D: DensityField>(
             }
         }
     }
+}
+
+/// The unscattered part of `L₀`'s `k ≥ 1` terms: `J_k` at `y_t` holds
+/// `T(y_t, y') S₁(y', n)` from the point `y'` a clock `k s*` further along
+/// the ray, so over the window they add up to the single scatter on the
+/// rest of the ray up to a clock of `(N+1) s*`, `∫ T(x, y) S₁(y, n) dt`
+/// over `[window, end]`, marched here at `samples` stratified points (the
+/// walks keep this part out of what `L₀` reconstructs: see
+/// [`Part::Scattered`]).
+#[allow(clippy::too_many_arguments)] // the ray, its window and the cache
+fn single_beyond_window<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    cache: &InternalLights,
+    x: Vec3,
+    dir: Vec3,
+    window: f32,
+    len: f32,
+    samples: u32,
+    rng: &mut Rng,
+) -> Vec3 {
+    let terms = cache.params.terms;
+    if terms == 0 || window >= len {
+        return Vec3::ZERO;
+    }
+    let budget = cache.s_star * (terms + 1) as f32;
+    let end = match march_clock(vol, cache.params.clock, x, dir, 0.0, len, len, budget) {
+        ClockMarch::Reached(t) => t,
+        ClockMarch::Exhausted(_) => len,
+    };
+    if end <= window {
+        return Vec3::ZERO;
+    }
+    let n = -dir;
+    let step = (end - window) / samples as f32;
+    let mut sum = Vec3::ZERO;
+    for j in 0..samples {
+        let t = window + (j as f32 + rng.next_f32()) * step;
+        let y = x + dir * t;
+        let rho = vol.density.density(y);
+        if rho <= 0.0 {
+            continue;
+        }
+        let s1 = cache.scatter * rho * single_scatter_source(vol, lights, y, n, rng);
+        if s1 == Vec3::ZERO {
+            continue;
+        }
+        sum += transmittance(vol, x, dir, t, rng) * s1 * step;
+    }
+    sum
 }
 
 /// Distance from `p` to the segment `a + t d`, `t ∈ [0, len]` (`d` unit).
@@ -139,7 +195,7 @@ pub fn gather<D: DensityField>(
         let t = (j as f32 + rng.next_f32()) * step;
         let y = x + dir * t;
         let rho = vol.density.density(y);
-        let j_hat = cache.reconstruct_multi(y, n, rho);
+        let j_hat = cache.reconstruct_multi(y, n, rho, Part::Scattered);
         let (s1, l1) = if rho > 0.0 {
             let s1 = cache.scatter * rho * single_scatter_source(vol, lights, y, n, rng);
             let l1 = if field {
@@ -159,6 +215,7 @@ pub fn gather<D: DensityField>(
         out.internal += tr * l1 * step;
         out.single += tr * s1 * step;
     }
+    out.single += single_beyond_window(vol, lights, cache, x, dir, window, len, samples, rng);
     if field {
         return out;
     }
@@ -317,7 +374,7 @@ fn field_l1_at<D: DensityField>(
     let r = rng.next_f32() * r_max;
     let xp = y + back * r;
     let rho = vol.density.density(xp);
-    let mut j = cache.reconstruct_multi(xp, travel, rho);
+    let mut j = cache.reconstruct_multi(xp, travel, rho, Part::All);
     if rho > 0.0 {
         j += cache.scatter * rho * single_scatter_source(vol, lights, xp, travel, rng);
     }
@@ -433,6 +490,7 @@ mod tests {
                     weight: v,
                 }],
                 vec![Vec3::ZERO; count],
+                multi.clone(),
                 multi,
                 Vec::new(),
                 vec![Vec3::ZERO; 2],
@@ -531,6 +589,7 @@ mod tests {
                 &params,
                 lights.clone(),
                 vec![Vec3::ZERO; count * lights.len()],
+                multi.clone(),
                 multi,
                 Vec::new(),
                 vec![Vec3::ZERO; 2],
@@ -569,6 +628,106 @@ mod tests {
                     se1[c],
                     l1[c]
                 );
+            }
+        }
+    }
+
+    /// The marched single scatter, window and beyond, against its closed
+    /// form: in a homogeneous cube lit by a sun travelling along `−y`, a
+    /// camera ray along `+x` at height `y₀` sees `S₁ = b P(0) E
+    /// e^{−σ(1−y₀)}` everywhere, so `single` must be
+    /// `S₁ (1 − e^{−σ t_end})/σ` with `t_end` where the clock reaches
+    /// `(N+1) s*` or the ray leaves the cube: the `k = 0` part of `L₀` plus
+    /// the unscattered part of its `k ≥ 1` terms, for both clocks, with the
+    /// truncation inside the cube (N = 3) and beyond it (N = 10).
+    #[test]
+    fn single_scatter_reaches_the_series_end() {
+        let sigma = 0.6f32;
+        let albedo = 0.8f32;
+        let g = 0.3f32;
+        let vol = Volume::new(
+            Cube,
+            Optics {
+                sigma_t: Vec3::splat(sigma),
+                albedo: Vec3::splat(albedo),
+                g,
+            },
+            8,
+        );
+        let e_sun = Vec3::new(2.0, 1.0, 0.5);
+        let lights = Lights {
+            suns: vec![crate::physics::lights::Sun {
+                direction: -Vec3::Y,
+                irradiance: e_sun,
+            }],
+            points: Vec::new(),
+        };
+        let (y0, z0) = (0.2f32, -0.1f32);
+        let eye = Vec3::new(-3.0, y0, z0);
+        let s1 = (albedo * sigma) as f64
+            * phase::hg(g, 0.0) as f64
+            * (-(sigma as f64) * (1.0 - y0 as f64)).exp();
+        let s_geo = 0.3f32;
+        for terms in [3u32, 10] {
+            let t_end = (s_geo as f64 * (terms + 1) as f64).min(2.0);
+            let expect =
+                e_sun.as_dvec3() * (s1 * (1.0 - (-(sigma as f64) * t_end).exp()) / sigma as f64);
+            for (clock, s_star) in [
+                (Clock::Geometric, s_geo),
+                (Clock::OpticalDepth, sigma * s_geo),
+            ] {
+                let params = InternalParams {
+                    s_star,
+                    lights: 1,
+                    terms,
+                    walks: 1,
+                    sh_order: 1,
+                    kernel_radius: Some(0.1),
+                    uniform_mix: 0.0,
+                    clock,
+                    l1: L1Form::Points,
+                    seed: 0,
+                };
+                let count = sh_count(1);
+                let cache = InternalLights::assemble(
+                    &vol,
+                    &lights,
+                    &params,
+                    vec![InternalLight {
+                        position: Vec3::new(0.5, 0.5, 0.5),
+                        density: 1.0,
+                        weight: 1.0,
+                    }],
+                    vec![Vec3::ZERO; count],
+                    vec![Vec3::ZERO; count],
+                    vec![Vec3::ZERO; count],
+                    vec![Vec3::ONE],
+                    vec![Vec3::ZERO; terms as usize + 1],
+                    8.0,
+                );
+                let n = 100_000u32;
+                let (mut sum, mut sum2) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
+                for i in 0..n {
+                    let mut rng = Rng::for_sample(31, i, terms);
+                    let v = gather(&vol, &lights, &cache, eye, Vec3::X, 2, &mut rng)
+                        .single
+                        .as_dvec3();
+                    sum += v;
+                    sum2 += v * v;
+                }
+                let mean = sum / n as f64;
+                let var = (sum2 / n as f64 - mean * mean).max(glam::DVec3::ZERO) / n as f64;
+                eprintln!("N = {terms}, {clock:?}: single {mean:?} vs {expect:?}");
+                for c in 0..3 {
+                    let se = var[c].sqrt();
+                    assert!(
+                        (mean[c] - expect[c]).abs() <= 4.0 * se,
+                        "N = {terms}, {clock:?}, channel {c}: {} ± {se} vs {}",
+                        mean[c],
+                        expect[c]
+                    );
+                    assert!(se < 0.01 * expect[c], "too noisy to tell");
+                }
             }
         }
     }
