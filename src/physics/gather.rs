@@ -411,6 +411,19 @@ mod tests {
         }
     }
 
+    /// The homogeneous cube with grey `σ_t`, albedo and `g`.
+    fn cube(sigma: f32, albedo: f32, g: f32) -> Volume<Cube> {
+        Volume::new(
+            Cube,
+            Optics {
+                sigma_t: Vec3::splat(sigma),
+                albedo: Vec3::splat(albedo),
+                g,
+            },
+            8,
+        )
+    }
+
     /// One isotropic internal light in a homogeneous cube gathers, on
     /// average, to the quadrature of METHOD.md §6's `L₀` (its kernel
     /// reconstruction: `J` within `h` of the light) plus `L₁`, for both
@@ -420,15 +433,7 @@ mod tests {
         let sigma = 0.6f32;
         let albedo = 0.8f32;
         let g = 0.4f32;
-        let vol = Volume::new(
-            Cube,
-            Optics {
-                sigma_t: Vec3::splat(sigma),
-                albedo: Vec3::splat(albedo),
-                g,
-            },
-            8,
-        );
+        let vol = cube(sigma, albedo, g);
         let xi = Vec3::new(0.2, -0.1, 0.3);
         let v = 0.05f32;
         let j0 = Vec3::new(1.0, 0.5, 0.25);
@@ -534,15 +539,7 @@ mod tests {
     fn field_l1_matches_closed_form() {
         let sigma = 0.6f32;
         let albedo = 0.8f32;
-        let vol = Volume::new(
-            Cube,
-            Optics {
-                sigma_t: Vec3::splat(sigma),
-                albedo: Vec3::splat(albedo),
-                g: 0.5,
-            },
-            8,
-        );
+        let vol = cube(sigma, albedo, 0.5);
         let j0 = Vec3::new(1.0, 0.5, 0.25);
         let s_geo = 0.3f32;
         let mut lights = Vec::new();
@@ -645,15 +642,7 @@ mod tests {
         let sigma = 0.6f32;
         let albedo = 0.8f32;
         let g = 0.3f32;
-        let vol = Volume::new(
-            Cube,
-            Optics {
-                sigma_t: Vec3::splat(sigma),
-                albedo: Vec3::splat(albedo),
-                g,
-            },
-            8,
-        );
+        let vol = cube(sigma, albedo, g);
         let e_sun = Vec3::new(2.0, 1.0, 0.5);
         let lights = Lights {
             suns: vec![crate::physics::lights::Sun {
