@@ -415,7 +415,7 @@ fn gather_agrees_thin_sphere_point_lights() {
 //   within the spread of image means between light sets.
 
 use lantern::gpu::walks::{build_internal_lights_gpu, place_lights_gpu};
-use lantern::physics::gated_walk::{accumulate_j_split, GateSettings};
+use lantern::physics::gated_walk::{accumulate_j_from, GateSettings};
 use lantern::physics::internal::{InternalParams, PLACEMENT_RESOLUTION};
 use lantern::physics::placement::PlacementDensity;
 use lantern::physics::reference::RR_START_DEPTH;
@@ -631,7 +631,7 @@ fn cpu_walks(
         let n = Vec3::new(s * phi.cos(), s * phi.sin(), z);
         per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
         unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
-        accumulate_j_split(
+        accumulate_j_from(
             vol,
             lights,
             x,
@@ -640,7 +640,7 @@ fn cpu_walks(
             1,
             &mut rng,
             &mut per_walk,
-            &mut unscattered,
+            Some(&mut unscattered),
         );
         let total: Vec3 = per_walk[1..].iter().sum();
         out.f.add(per_walk.get(1).copied().unwrap_or(Vec3::ZERO));

@@ -79,8 +79,10 @@ fn single_beyond_window(
     if terms == 0u || window >= len {
         return vec3<f32>(0.0);
     }
-    let budget = gather_params.s_star * f32(terms + 1u);
-    let em = march_clock(gather_params.clock, x, dir, 0.0, len, len, budget);
+    // The clock is at `s*` at the window's end: march on from there (not
+    // again from `x`) for the remaining `N s*`.
+    let budget = gather_params.s_star * f32(terms);
+    let em = march_clock(gather_params.clock, x, dir, window, len, len, budget);
     let end = select(len, em.value, em.reached);
     if end <= window {
         return vec3<f32>(0.0);

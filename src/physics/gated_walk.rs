@@ -228,13 +228,18 @@ pub fn accumulate_j<D: DensityField>(
     rng: &mut Rng,
     out: &mut [Vec3],
 ) {
-    accumulate_j_from(vol, lights, z, n, settings, 0, rng, out);
+    accumulate_j_from(vol, lights, z, n, settings, 0, rng, out, None);
 }
 
 /// [`accumulate_j`] for the terms `k ≥ first` only (the others are left
 /// untouched and cost no shadow rays): the internal lights evaluate the
 /// `k = 0` term, `S₁` itself, exactly and need the walk only for `k ≥ 1`.
-#[allow(clippy::too_many_arguments)] // accumulate_j's arguments and `first`
+/// With `unscattered`, also adds to it the part of each term that the walk
+/// carried to its gate without a real collision: the single scatter
+/// `T S₁` from `k s*` further along `−n`, which the final gather marches
+/// exactly (the single scatter beyond the window) instead of reading it
+/// back from the lights' spherical harmonics.
+#[allow(clippy::too_many_arguments)] // accumulate_j's, `first` and one more output
 pub fn accumulate_j_from<D: DensityField>(
     vol: &Volume<D>,
     lights: &Lights,
@@ -244,69 +249,18 @@ pub fn accumulate_j_from<D: DensityField>(
     first: u32,
     rng: &mut Rng,
     out: &mut [Vec3],
-) {
-    let gates = out.len();
-    gate_contributions(vol, lights, z, n, settings, first, gates, rng, |k, v, _| {
-        out[k] += v;
-    });
-}
-
-/// [`accumulate_j_from`], also adding to `unscattered` the part of each
-/// term that the walk carried to its gate without a real collision: the
-/// single scatter `T S₁` from `k s*` further along `−n`, which the final
-/// gather integrates exactly (the marched single scatter beyond the
-/// window) instead of through the lights' spherical harmonics.
-#[allow(clippy::too_many_arguments)] // accumulate_j_from's and one more output
-pub fn accumulate_j_split<D: DensityField>(
-    vol: &Volume<D>,
-    lights: &Lights,
-    z: Vec3,
-    n: Vec3,
-    settings: &GateSettings,
-    first: u32,
-    rng: &mut Rng,
-    out: &mut [Vec3],
-    unscattered: &mut [Vec3],
-) {
-    let gates = out.len().min(unscattered.len());
-    gate_contributions(
-        vol,
-        lights,
-        z,
-        n,
-        settings,
-        first,
-        gates,
-        rng,
-        |k, v, scattered| {
-            out[k] += v;
-            if !scattered {
-                unscattered[k] += v;
-            }
-        },
-    );
-}
-
-/// Runs one walk and calls `add(k, Ĵ_k contribution, scattered)` for the
-/// gates `first ≤ k < gates` (`scattered`: the walk collided before it).
-#[allow(clippy::too_many_arguments)] // accumulate_j_from's, with the sink
-fn gate_contributions<D: DensityField>(
-    vol: &Volume<D>,
-    lights: &Lights,
-    z: Vec3,
-    n: Vec3,
-    settings: &GateSettings,
-    first: u32,
-    gates: usize,
-    rng: &mut Rng,
-    mut add: impl FnMut(usize, Vec3, bool),
+    mut unscattered: Option<&mut [Vec3]>,
 ) {
     let scatter = vol.optics.albedo * vol.optics.sigma_t;
     let rho_z = vol.density.density(z);
     if settings.clock == Clock::OpticalDepth && rho_z <= 0.0 {
         return;
     }
-    let gates = gates.min(settings.gate_count());
+    let gates = match &unscattered {
+        Some(u) => out.len().min(u.len()),
+        None => out.len(),
+    }
+    .min(settings.gate_count());
     if gates == 0 {
         return;
     }
@@ -329,7 +283,11 @@ fn gate_contributions<D: DensityField>(
                 return;
             }
             let source = single_scatter_source(vol, lights, zk, nk, rng);
-            add(k as usize, w * scatter * rho * source, scattered);
+            let v = w * scatter * rho * source;
+            out[k as usize] += v;
+            if let (false, Some(u)) = (scattered, unscattered.as_deref_mut()) {
+                u[k as usize] += v;
+            }
         },
         |_| {},
     );

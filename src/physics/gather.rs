@@ -122,8 +122,10 @@ fn single_beyond_window<D: DensityField>(
     if terms == 0 || window >= len {
         return Vec3::ZERO;
     }
-    let budget = cache.s_star * (terms + 1) as f32;
-    let end = match march_clock(vol, cache.params.clock, x, dir, 0.0, len, len, budget) {
+    // The clock is at `s*` at the window's end: march on from there (not
+    // again from `x`) for the remaining `N s*`.
+    let budget = cache.s_star * terms as f32;
+    let end = match march_clock(vol, cache.params.clock, x, dir, window, len, len, budget) {
         ClockMarch::Reached(t) => t,
         ClockMarch::Exhausted(_) => len,
     };

@@ -45,7 +45,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::gated_walk::{accumulate_j_split, Clock, GateSettings};
+use super::gated_walk::{accumulate_j_from, Clock, GateSettings};
 use super::light_index::LightGrid;
 use super::lights::Lights;
 use super::phase;
@@ -332,7 +332,7 @@ impl InternalLights {
                     let n = rotation * Vec3::new(s * phi.cos(), s * phi.sin(), z);
                     per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
                     unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
-                    accumulate_j_split(
+                    accumulate_j_from(
                         vol,
                         external,
                         x,
@@ -341,7 +341,7 @@ impl InternalLights {
                         1,
                         &mut rng,
                         &mut per_walk,
-                        &mut unscattered,
+                        Some(&mut unscattered),
                     );
                     let total: Vec3 = per_walk[1..].iter().sum();
                     if total == Vec3::ZERO {
