@@ -199,11 +199,11 @@ fn accumulate_j_from(
         }
         let gate_clock = f32(next) * s_star;
         let budget = gate_clock - clock_at_enter;
-        // The CPU marches the optical-depth clock lazily when the gate is
-        // more than 1 τ away (`optical_depth_flight`: from tentative
-        // collision to tentative collision, stopping at the gate); the same
-        // estimator, with the quadrature lattice anchored elsewhere. Here
-        // the flight marches to the gate and again to the collision.
+        // The CPU marches the optical-depth clock only once the majorant
+        // optical depth says the gate may be near (`LazyClock`,
+        // `optical_depth_flight`: the same clock on the same lattice, and
+        // the same estimator). Here the flight marches to the gate and
+        // again to the collision.
         let march = march_clock(settings.clock, origin, dir, clip.t0, clip.t1, clip.t1, budget);
         var flight_end = clip.t1;
         if march.reached {

@@ -49,13 +49,16 @@
 //!
 //! The optical depth along a straight flight is integrated by the midpoint
 //! rule on a lattice of step `cell / 2` (`cell`: the smallest extent of a
-//! majorant cell), anchored at the start of each flight (in a lazy flight,
-//! `optical_depth_flight`, at each tentative collision) and of each
-//! majorant cell:
-//! exact for densities that are constant in each majorant cell, and
-//! second-order accurate otherwise. The clock is that quadrature; the
-//! collisions themselves come from spectral tracking against the true `c`,
-//! so the walk stays unbiased for `L` whatever the quadrature error.
+//! majorant cell), anchored at the start of each flight and of each
+//! majorant cell: exact for densities that are constant in each majorant
+//! cell, and second-order accurate otherwise. The clock is that quadrature;
+//! the collisions themselves come from spectral tracking against the true
+//! `c`, so the walk stays unbiased for `L` whatever the quadrature error.
+//! A walk marches its clock only when the next gate may be near: the
+//! majorant optical depth that tracking draws anyway bounds the quadrature
+//! from above, so flights far from a gate stay pending and are marched
+//! only once a gate may come (`LazyClock`), and a walk that leaves the
+//! medium before its next gate never marches its last flights.
 
 use glam::Vec3;
 
@@ -63,7 +66,7 @@ use super::lights::Lights;
 use super::phase;
 use super::reference::single_scatter_source;
 use super::rng::Rng;
-use super::tracking::{free_flight, sample_tentative, spectral_event, TentativeEvent};
+use super::tracking::{free_flight, spectral_event, TentativeEvent};
 use super::volume::{DensityField, Volume};
 
 /// What the walk's clock counts between gates.
@@ -111,6 +114,15 @@ pub fn clock_rate<D: DensityField>(vol: &Volume<D>, clock: Clock, p: Vec3) -> f3
 /// Lattice steps per majorant cell for the optical-depth quadrature.
 const CLOCK_STEPS_PER_CELL: f32 = 2.0;
 
+/// The optical-depth clock's quadrature step: the smallest extent of a
+/// majorant cell over [`CLOCK_STEPS_PER_CELL`].
+#[inline]
+fn clock_step<D: DensityField>(vol: &Volume<D>) -> f32 {
+    let grid = &vol.majorants;
+    let cell = (grid.max - grid.min) / grid.res.as_vec3();
+    (cell.min_element() / CLOCK_STEPS_PER_CELL).max(1e-12)
+}
+
 /// Where a clock budget runs out along a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ClockMarch {
@@ -150,8 +162,7 @@ pub fn march_clock<D: DensityField>(
         return ClockMarch::Reached(t0);
     }
     let grid = &vol.majorants;
-    let cell = (grid.max - grid.min) / grid.res.as_vec3();
-    let h = (cell.min_element() / CLOCK_STEPS_PER_CELL).max(1e-12);
+    let h = clock_step(vol);
     let sigma_g = vol.optics.sigma_t.max_element();
     let mut acc = 0.0f32;
     let mut result = None;
@@ -209,7 +220,7 @@ pub fn gated_walk<D: DensityField>(
         settings,
         rng,
         |k, w, p, dir, _, _| on_gate(k, w, p, dir),
-        |_| {},
+        None,
     );
 }
 
@@ -289,7 +300,7 @@ pub fn accumulate_j_from<D: DensityField>(
                 u[k as usize] += v;
             }
         },
-        |_| {},
+        None,
     );
 }
 
@@ -308,107 +319,264 @@ pub fn estimate_j<D: DensityField>(
     out
 }
 
-/// The optical depth to the next gate above which a flight marches its
-/// clock lazily (`optical_depth_flight`); below it, marching to the gate
-/// first and again to the collision is cheaper than a march per tentative
-/// collision (measured on the chromatic sphere at `s* = 0.5`, where the
-/// lazy march alone was 4 % slower, and on the puffs at their default
-/// `s* = 1.6`, where it was 1.4× faster).
-const LAZY_CLOCK_MIN_BUDGET: f32 = 1.0;
-
 /// How one flight of a walk ends.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Flight {
-    /// A real collision at ray parameter `t`, the clock having advanced by
-    /// `advanced` since the flight's start.
-    Collision { t: f32, advanced: f32 },
+    /// A real collision at ray parameter `t`. With the geometric clock, or
+    /// when the optical-depth clock was resolved, `advanced` is how far the
+    /// clock advanced since the flight's start; `None` when the flight was
+    /// left pending in the [`LazyClock`].
+    Collision { t: f32, advanced: Option<f32> },
     /// The clock reached the next gate at ray parameter `t` first.
     Gate(f32),
     /// The flight left the box (or can carry no more light) first.
     Exit,
 }
 
+/// Pending flights a [`LazyClock`] holds before it resolves them anyway.
+const LAZY_CLOCK_PENDING: usize = 16;
+
+/// The optical-depth clock of one walk, marched only when a gate may be
+/// near. A flight that ends in a collision while its majorant optical depth
+/// (spectral tracking draws it anyway: the sum of the exponential steps)
+/// shows that the clock cannot have reached the next gate is kept pending,
+/// unmarched: the midpoint quadrature of `c_g` never exceeds the majorant,
+/// so `exact + Σ pending ≤ exact + slack`. The pending flights are marched
+/// (each with its lattice anchored at its start, as an eager flight's
+/// would be) only when a gate may come within the bound, so a walk that
+/// leaves the medium before its next gate never marches its last flights
+/// at all (the clock's quadrature was about half of the re-sampling time on
+/// the puffs before).
+struct LazyClock {
+    /// The clock at the start of the first pending flight.
+    exact: f32,
+    /// Upper bound of the pending flights' clock.
+    slack: f32,
+    /// Pending flights: `(origin, dir, t_start, t_end, t_exit)` (`t_exit`:
+    /// where the ray leaves the box, which fixes the quadrature lattice).
+    pending: [(Vec3, Vec3, f32, f32, f32); LAZY_CLOCK_PENDING],
+    len: usize,
+}
+
+impl LazyClock {
+    fn new(exact: f32) -> Self {
+        Self {
+            exact,
+            slack: 0.0,
+            pending: [(Vec3::ZERO, Vec3::ZERO, 0.0, 0.0, 0.0); LAZY_CLOCK_PENDING],
+            len: 0,
+        }
+    }
+
+    /// Marches the pending flights; returns the exact clock after them.
+    fn resolve<D: DensityField>(&mut self, vol: &Volume<D>) -> f32 {
+        for &(origin, dir, t0, t1, t_exit) in &self.pending[..self.len] {
+            if let ClockMarch::Exhausted(d) = march_clock(
+                vol,
+                Clock::OpticalDepth,
+                origin,
+                dir,
+                t0,
+                t_exit,
+                t1,
+                f32::INFINITY,
+            ) {
+                self.exact += d;
+            }
+        }
+        self.len = 0;
+        self.slack = 0.0;
+        self.exact
+    }
+
+    /// Keeps the flight `origin + t dir`, `t ∈ [t0, t1]` (the ray leaving
+    /// the box at `t_exit`), whose clock is at most `bound`, pending.
+    fn defer<D: DensityField>(
+        &mut self,
+        vol: &Volume<D>,
+        flight: (Vec3, Vec3, f32, f32, f32),
+        bound: f32,
+    ) {
+        if self.len == LAZY_CLOCK_PENDING {
+            self.resolve(vol);
+        }
+        self.pending[self.len] = flight;
+        self.len += 1;
+        self.slack += bound;
+    }
+}
+
 /// One flight with the optical-depth clock over `[t_enter, t_exit]` of
-/// `origin + t dir`: spectral tracking's tentative collisions in order,
-/// the clock marched from each to the next (so only as far as the flight
-/// goes, where marching to the gate first and then again to the collision
-/// marched about twice as far: 75 % of the re-sampling time went to
-/// the clock), stopping at the gate (`budget` of clock) if it comes before
-/// the next tentative collision. Tentative collisions past the gate are
-/// never drawn into the weight, so this is the same estimator as tracking
-/// to the gate: flights are memoryless. The clock's midpoint lattice is
-/// anchored at each tentative collision instead of the flight's start (the
-/// same order of accuracy).
-#[allow(clippy::too_many_arguments)] // one flight: ray, span, budget, state
+/// `origin + t dir`, the next gate at clock `gate_clock`, in one traversal
+/// of the majorant cells: spectral tracking's tentative collisions in
+/// order and, once a gate may be near, the clock alongside them. While the
+/// majorant optical depth says the gate cannot have come (see
+/// [`LazyClock`]) nothing is marched; at the first tentative collision
+/// where it might have, the pending flights and this one so far are
+/// marched ([`march_clock`]), and from there the clock advances with the
+/// tracking, on the lattice [`march_clock`] would use from `t_enter`
+/// (steps of `h` from the start of each cell; a step's density is sampled
+/// once however many tentative collisions fall in it), stopping at the
+/// gate if it comes before the next tentative collision. Tentative
+/// collisions past the gate are never drawn into the weight, so this is the
+/// same estimator as tracking to the gate: flights are memoryless.
+#[allow(clippy::too_many_arguments)] // one flight: ray, span, gate, state
 fn optical_depth_flight<D: DensityField>(
     vol: &Volume<D>,
     origin: Vec3,
     dir: Vec3,
     t_enter: f32,
     t_exit: f32,
-    budget: f32,
+    gate_clock: f32,
+    lazy: &mut LazyClock,
     weight: &mut Vec3,
     rng: &mut Rng,
 ) -> Flight {
-    // The clock from `from` to `to` (lattice anchored at `from`) against
-    // what is left of the budget.
-    let march = |from: f32, to: f32, left: f32| {
-        march_clock(
-            vol,
-            Clock::OpticalDepth,
-            origin,
-            dir,
-            from,
-            t_exit,
-            to,
-            left,
-        )
-    };
+    let grid = &vol.majorants;
+    let h = clock_step(vol);
+    let sigma_g = vol.optics.sigma_t.max_element();
+    // Bound mode: `bound` is an upper bound of the clock since
+    // `lazy.exact`. Exact mode (`resolved`): `clock` is the clock from
+    // `t_enter` to the current position on top of `lazy.exact`.
+    let mut resolved = false;
+    let mut bound = lazy.slack;
     let mut clock = 0.0f32;
-    let mut t_prev = t_enter;
+    // The lattice step the clock is in: (cell start, step index, step
+    // end, rate), so that a step is sampled once.
+    let mut step = (f32::NAN, u32::MAX, 0.0f32, 0.0f32);
     let mut outcome = None;
-    sample_tentative(
-        &vol.majorants,
-        origin,
-        dir,
-        t_enter,
-        t_exit,
-        rng,
-        |t, m, rng| {
-            match march(t_prev, t, budget - clock) {
-                ClockMarch::Reached(t_gate) => {
-                    outcome = Some(Flight::Gate(t_gate));
-                    return false;
-                }
-                ClockMarch::Exhausted(d) => {
+    let mut drawn = -(1.0 - rng.next_f32()).ln();
+    let mut tau = drawn;
+    let completed = grid.walk(origin, dir, t_enter, t_exit, |a, b, m| {
+        let mut t = a;
+        loop {
+            // The next tentative collision in this cell, if any.
+            let seg_tau = m * (b - t);
+            let next = (m > 0.0 && tau < seg_tau).then(|| t + tau / m);
+            let target = next.unwrap_or(b);
+            if resolved && m > 0.0 {
+                // Advance the clock from `t` to `target` step by step.
+                while t < target {
+                    if step.0 != a || step.2 <= t {
+                        let i = step_index(a, t, h, step);
+                        let p0 = a + i as f32 * h;
+                        let p1 = (a + (i + 1) as f32 * h).min(b);
+                        let c = sigma_g * vol.density.density(origin + dir * (0.5 * (p0 + p1)));
+                        step = (a, i, p1, c);
+                    }
+                    let (_, _, p1, c) = step;
+                    let end = p1.min(target);
+                    let d = c * (end - t).max(0.0);
+                    let left = gate_clock - lazy.exact - clock;
+                    if c > 0.0 && d >= left {
+                        outcome = Some(Flight::Gate((t + left / c).min(end)));
+                        return false;
+                    }
                     clock += d;
-                    t_prev = t;
+                    t = end;
+                }
+            }
+            let Some(t_event) = next else {
+                tau -= seg_tau;
+                return true;
+            };
+            t = t_event;
+            if !resolved {
+                bound += drawn;
+                if lazy.exact + bound >= gate_clock {
+                    resolved = true;
+                    let exact = lazy.resolve(vol);
+                    match march_clock(
+                        vol,
+                        Clock::OpticalDepth,
+                        origin,
+                        dir,
+                        t_enter,
+                        t_exit,
+                        t,
+                        gate_clock - exact,
+                    ) {
+                        ClockMarch::Reached(t_gate) => {
+                            outcome = Some(Flight::Gate(t_gate));
+                            return false;
+                        }
+                        ClockMarch::Exhausted(d) => clock = d,
+                    }
                 }
             }
             match spectral_event(vol, origin + dir * t, m, weight, rng) {
                 TentativeEvent::Real => {
-                    outcome = Some(Flight::Collision { t, advanced: clock });
-                    false
+                    outcome = Some(Flight::Collision {
+                        t,
+                        advanced: resolved.then_some(clock),
+                    });
+                    return false;
                 }
-                TentativeEvent::Null => true,
+                TentativeEvent::Null => {}
                 TentativeEvent::Dead => {
                     outcome = Some(Flight::Exit);
-                    false
+                    return false;
                 }
             }
-        },
-    );
-    // No collision before the exit: is there a gate on the rest?
-    outcome.unwrap_or_else(|| match march(t_prev, t_exit, budget - clock) {
+            drawn = -(1.0 - rng.next_f32()).ln();
+            tau = drawn;
+        }
+    });
+    if let Some(outcome) = outcome {
+        if let Flight::Collision { t, advanced: None } = outcome {
+            lazy.defer(vol, (origin, dir, t_enter, t, t_exit), bound - lazy.slack);
+        }
+        return outcome;
+    }
+    debug_assert!(completed);
+    if resolved {
+        // The clock was followed to the exit without reaching the gate.
+        return Flight::Exit;
+    }
+    // Bound mode to the exit: is there a gate on the way?
+    if lazy.exact + bound + (drawn - tau) < gate_clock {
+        return Flight::Exit;
+    }
+    let exact = lazy.resolve(vol);
+    match march_clock(
+        vol,
+        Clock::OpticalDepth,
+        origin,
+        dir,
+        t_enter,
+        t_exit,
+        t_exit,
+        gate_clock - exact,
+    ) {
         ClockMarch::Reached(t_gate) => Flight::Gate(t_gate),
         ClockMarch::Exhausted(_) => Flight::Exit,
-    })
+    }
+}
+
+/// The index of the lattice step of the cell starting at `a` that holds
+/// `t` (steps `[a + i h, a + (i+1) h)`), starting from `step`'s if it is in
+/// the same cell (the usual case: the clock moves forward).
+#[inline]
+fn step_index(a: f32, t: f32, h: f32, step: (f32, u32, f32, f32)) -> u32 {
+    let mut i = if step.0 == a {
+        step.1
+    } else {
+        ((t - a) / h).max(0.0) as u32
+    };
+    // Rounding: make sure `t` lies before the step's end, as `march_clock`
+    // counts it.
+    while a + (i + 1) as f32 * h <= t {
+        i += 1;
+    }
+    i
 }
 
 /// The walk itself. `on_gate(k, weight, z_k, n_k, scattered, rng)` also
 /// learns whether the walk has collided yet and receives the random stream,
-/// so that the caller can trace shadow rays; `on_collision(clock)` is called at every
-/// real collision with the clock's value there (a hook for tests).
+/// so that the caller can trace shadow rays; `on_collision(clock)`, if
+/// given, is called at every real collision with the clock's value there (a
+/// hook for tests: it makes the optical-depth clock resolve at every
+/// collision).
 fn walk<D: DensityField>(
     vol: &Volume<D>,
     z: Vec3,
@@ -416,7 +584,7 @@ fn walk<D: DensityField>(
     settings: &GateSettings,
     rng: &mut Rng,
     mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, bool, &mut Rng),
-    mut on_collision: impl FnMut(f32),
+    mut on_collision: Option<&mut dyn FnMut(f32)>,
 ) {
     let s_star = settings.s_star.max(0.0);
     let last = settings.n_terms;
@@ -428,8 +596,10 @@ fn walk<D: DensityField>(
     let mut next = 1u32;
     let mut origin = z;
     let mut dir = -n;
-    // Clock value at `origin`.
-    let mut clock_at_origin = 0.0f32;
+    // The clock at `origin`: exactly `lazy.exact` with the geometric clock
+    // (which is never pending), `lazy.exact` plus the pending flights with
+    // the optical-depth clock.
+    let mut lazy = LazyClock::new(0.0);
     let mut collisions = 0u32;
     // One flight per iteration: from `origin` to the next gate, the next
     // real collision, or the exit of the box, whichever comes first.
@@ -438,13 +608,13 @@ fn walk<D: DensityField>(
             return;
         };
         let clock_at_enter = match settings.clock {
-            Clock::Geometric => clock_at_origin + t_enter,
-            Clock::OpticalDepth => clock_at_origin,
+            Clock::Geometric => lazy.exact + t_enter,
+            Clock::OpticalDepth => lazy.exact,
         };
         // Gates in the vacuum before the box (only when `z` is outside it,
         // and only for the geometric clock).
         while settings.clock == Clock::Geometric && next as f32 * s_star <= clock_at_enter {
-            let t = next as f32 * s_star - clock_at_origin;
+            let t = next as f32 * s_star - lazy.exact;
             on_gate(next, weight, origin + dir * t, -dir, collisions > 0, rng);
             if next == last {
                 return;
@@ -452,42 +622,35 @@ fn walk<D: DensityField>(
             next += 1;
         }
         let gate_clock = next as f32 * s_star;
-        let budget = gate_clock - clock_at_enter;
         let flight = match settings.clock {
-            Clock::OpticalDepth if budget > LAZY_CLOCK_MIN_BUDGET => {
-                optical_depth_flight(vol, origin, dir, t_enter, t_exit, budget, &mut weight, rng)
-            }
-            _ => {
-                let gate_t = match march_clock(
+            Clock::OpticalDepth => optical_depth_flight(
+                vol,
+                origin,
+                dir,
+                t_enter,
+                t_exit,
+                gate_clock,
+                &mut lazy,
+                &mut weight,
+                rng,
+            ),
+            Clock::Geometric => {
+                // The gate is `budget` further along the ray, the
+                // collision wherever tracking puts it before then.
+                let budget = gate_clock - clock_at_enter;
+                let gate_t = (t_enter + budget <= t_exit).then_some(t_enter + budget);
+                match free_flight(
                     vol,
-                    settings.clock,
                     origin,
                     dir,
                     t_enter,
-                    t_exit,
-                    t_exit,
-                    budget,
+                    gate_t.unwrap_or(t_exit),
+                    &mut weight,
+                    rng,
                 ) {
-                    ClockMarch::Reached(t) => Some(t),
-                    ClockMarch::Exhausted(_) => None,
-                };
-                let flight_end = gate_t.unwrap_or(t_exit);
-                match free_flight(vol, origin, dir, t_enter, flight_end, &mut weight, rng) {
                     Some(t_hit) => Flight::Collision {
                         t: t_hit,
-                        advanced: match march_clock(
-                            vol,
-                            settings.clock,
-                            origin,
-                            dir,
-                            t_enter,
-                            t_exit,
-                            t_hit,
-                            f32::INFINITY,
-                        ) {
-                            ClockMarch::Reached(_) => 0.0,
-                            ClockMarch::Exhausted(d) => d,
-                        },
+                        advanced: Some(t_hit),
                     },
                     None => gate_t.map_or(Flight::Exit, Flight::Gate),
                 }
@@ -495,10 +658,14 @@ fn walk<D: DensityField>(
         };
         match flight {
             Flight::Collision { t: t_hit, advanced } => {
-                // Rounding must not put the collision past the gate.
-                clock_at_origin = (clock_at_enter + advanced).min(gate_clock);
+                if let Some(advanced) = advanced {
+                    // Rounding must not put the collision past the gate.
+                    lazy.exact = (lazy.exact + advanced).min(gate_clock);
+                }
                 origin += dir * t_hit;
-                on_collision(clock_at_origin);
+                if let Some(hook) = on_collision.as_deref_mut() {
+                    hook(lazy.resolve(vol).min(gate_clock));
+                }
                 weight *= vol.optics.albedo;
                 collisions += 1;
                 if collisions >= settings.rr_start {
@@ -523,7 +690,7 @@ fn walk<D: DensityField>(
                 next += 1;
                 // The flight goes on from the gate: flights are memoryless,
                 // and the quadrature lattice is re-anchored here.
-                clock_at_origin = gate_clock;
+                lazy = LazyClock::new(gate_clock);
             }
         }
     }
@@ -584,12 +751,12 @@ mod tests {
                 settings,
                 &mut rng,
                 |_, _, _, _, _, _| {},
-                |clock| {
+                Some(&mut |clock: f32| {
                     let k = (clock / s).floor() as usize;
                     if k < per_window.len() {
                         per_window[k] += 1;
                     }
-                },
+                }),
             );
             for c in per_window {
                 hist[c.min(63)] += 1;
@@ -679,6 +846,75 @@ mod tests {
         let (chi2, dof) = chi2_poisson(&hist, 1.3);
         eprintln!("optical depth: χ² = {chi2:.1} with {dof} dof");
         assert!(dof >= 4 && chi2 < 29.6, "χ² = {chi2}, dof = {dof}");
+    }
+
+    #[test]
+    fn lazy_clock_finds_the_same_gates() {
+        // Marching consumes no random numbers, so a walk that keeps flights
+        // pending (no hook) and one that resolves its clock at every
+        // collision (the hook) take the same path: they must report the
+        // same gates at the same places. A gate that the majorant bound
+        // skipped, or a pending flight counted twice, would move them.
+        // Unbounded (walks reach every gate) and a small box (walks leave
+        // it, through the bound's exit check).
+        for half in [60.0f32, 2.0] {
+            let mut vol = Volume::new(
+                Field {
+                    base: 1.0,
+                    amp: 0.8,
+                },
+                Optics {
+                    sigma_t: Vec3::splat(1.0),
+                    albedo: Vec3::splat(0.9),
+                    g: 0.3,
+                },
+                8,
+            );
+            vol.bounds = (Vec3::splat(-half), Vec3::splat(half));
+            vol.majorants = crate::physics::majorant::MajorantGrid::build(
+                vol.bounds.0,
+                vol.bounds.1,
+                (half * 4.0) as u32,
+                |_, _| 1.8,
+            );
+            let settings = GateSettings {
+                s_star: 2.5,
+                n_terms: 8,
+                clock: Clock::OpticalDepth,
+                rr_start: u32::MAX,
+            };
+            let (mut gates, mut pending_gates) = (0usize, 0usize);
+            for w in 0..4000u32 {
+                let run = |resolve_each: bool| {
+                    let mut rng = Rng::for_sample(11, w, 0);
+                    let mut out = Vec::new();
+                    let mut hook = |_: f32| {};
+                    walk(
+                        &vol,
+                        Vec3::new(0.3, -0.2, 0.1),
+                        Vec3::Z,
+                        &settings,
+                        &mut rng,
+                        |k, _, p, _, scattered, _| out.push((k, p, scattered)),
+                        resolve_each.then_some(&mut hook as &mut dyn FnMut(f32)),
+                    );
+                    out
+                };
+                let (lazy, eager) = (run(false), run(true));
+                assert_eq!(lazy.len(), eager.len(), "walk {w}: {lazy:?} vs {eager:?}");
+                for (a, b) in lazy.iter().zip(&eager) {
+                    assert_eq!((a.0, a.2), (b.0, b.2), "walk {w}");
+                    assert!((a.1 - b.1).length() < 1e-4, "walk {w}: {a:?} vs {b:?}");
+                }
+                gates += lazy.len();
+                pending_gates += lazy.iter().filter(|g| g.2).count();
+            }
+            eprintln!("box ±{half}: {gates} gates, {pending_gates} after a collision");
+            assert!(
+                pending_gates > 2000,
+                "too few gates after collisions to test"
+            );
+        }
     }
 
     #[test]

@@ -75,8 +75,10 @@ impl MajorantGrid {
         let res_f = self.res.as_vec3();
         let cell_size = size / res_f;
         let p = origin + dir * t_min;
-        let c = ((p - self.min) / cell_size).floor();
-        let mut cell = c.clamp(Vec3::ZERO, res_f - Vec3::ONE).as_ivec3();
+        // Clamped to `≥ 0` first, truncation is the floor (one instruction
+        // instead of a libm call per walk: 2 % of the re-sampling time).
+        let c = ((p - self.min) / cell_size).max(Vec3::ZERO);
+        let mut cell = c.min(res_f - Vec3::ONE).as_ivec3();
         let mut t_next = [0.0f32; 3];
         let mut dt = [0.0f32; 3];
         let mut step = [0i32; 3];
