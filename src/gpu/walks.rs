@@ -38,7 +38,7 @@ use super::renderer::{compute_pipeline, read_buffer, storage_buffer, SceneBuffer
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
 use crate::physics::gated_walk::Clock;
 use crate::physics::internal::{
-    InternalLight, InternalLights, InternalParams, PLACEMENT_RESOLUTION,
+    InternalLight, InternalLights, InternalParams, LightSources, PLACEMENT_RESOLUTION,
 };
 use crate::physics::placement::PlacementDensity;
 use crate::physics::reference::RR_START_DEPTH;
@@ -171,16 +171,19 @@ pub fn build_internal_lights_gpu(
             *e += v3(v);
         }
     }
-    let mut lights_out = InternalLights::assemble(
-        &prepared.volume,
-        &prepared.lights,
-        params,
+    let sources = LightSources {
         lights,
         f_coeffs,
         multi_coeffs,
         scattered_coeffs,
         arrival,
         term_energy,
+    };
+    let mut lights_out = InternalLights::assemble(
+        &prepared.volume,
+        &prepared.lights,
+        params,
+        sources,
         build.density_integral,
     );
     lights_out.timings.placement = t_place;

@@ -390,7 +390,7 @@ fn field_l1_at<D: DensityField>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::internal::{InternalLight, InternalParams};
+    use crate::physics::internal::{InternalLight, InternalParams, LightSources};
     use crate::physics::sh::sh_count;
     use crate::physics::volume::Optics;
 
@@ -491,16 +491,18 @@ mod tests {
                 &vol,
                 &Lights::default(),
                 &params,
-                vec![InternalLight {
-                    position: xi,
-                    density: 1.0,
-                    weight: v,
-                }],
-                vec![Vec3::ZERO; count],
-                multi.clone(),
-                multi,
-                Vec::new(),
-                vec![Vec3::ZERO; 2],
+                LightSources {
+                    lights: vec![InternalLight {
+                        position: xi,
+                        density: 1.0,
+                        weight: v,
+                    }],
+                    f_coeffs: vec![Vec3::ZERO; count],
+                    multi_coeffs: multi.clone(),
+                    scattered_coeffs: multi,
+                    arrival: Vec::new(),
+                    term_energy: vec![Vec3::ZERO; 2],
+                },
                 8.0,
             );
             let n = 400_000u32;
@@ -586,12 +588,14 @@ mod tests {
                 &vol,
                 &Lights::default(),
                 &params,
-                lights.clone(),
-                vec![Vec3::ZERO; count * lights.len()],
-                multi.clone(),
-                multi,
-                Vec::new(),
-                vec![Vec3::ZERO; 2],
+                LightSources {
+                    lights: lights.clone(),
+                    f_coeffs: vec![Vec3::ZERO; count * lights.len()],
+                    multi_coeffs: multi.clone(),
+                    scattered_coeffs: multi,
+                    arrival: Vec::new(),
+                    term_energy: vec![Vec3::ZERO; 2],
+                },
                 8.0,
             );
             let n = 200_000u32;
@@ -684,16 +688,18 @@ mod tests {
                     &vol,
                     &lights,
                     &params,
-                    vec![InternalLight {
-                        position: Vec3::new(0.5, 0.5, 0.5),
-                        density: 1.0,
-                        weight: 1.0,
-                    }],
-                    vec![Vec3::ZERO; count],
-                    vec![Vec3::ZERO; count],
-                    vec![Vec3::ZERO; count],
-                    vec![Vec3::ONE],
-                    vec![Vec3::ZERO; terms as usize + 1],
+                    LightSources {
+                        lights: vec![InternalLight {
+                            position: Vec3::new(0.5, 0.5, 0.5),
+                            density: 1.0,
+                            weight: 1.0,
+                        }],
+                        f_coeffs: vec![Vec3::ZERO; count],
+                        multi_coeffs: vec![Vec3::ZERO; count],
+                        scattered_coeffs: vec![Vec3::ZERO; count],
+                        arrival: vec![Vec3::ONE],
+                        term_energy: vec![Vec3::ZERO; terms as usize + 1],
+                    },
                     8.0,
                 );
                 let n = 100_000u32;

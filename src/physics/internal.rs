@@ -212,6 +212,27 @@ pub struct InternalLights {
     pub(crate) sigma_grey: f32,
 }
 
+/// The internal lights and their sources, as the walks leave them:
+/// [`InternalLights::assemble`] builds the kernel and the spatial indices
+/// around them.
+#[derive(Clone, Debug, Default)]
+pub struct LightSources {
+    /// Where the lights are, their density and weight `V_i`.
+    pub lights: Vec<InternalLight>,
+    /// `F` (the `k = 1` term): `(sh_order+1)²` SH coefficients per light.
+    pub f_coeffs: Vec<Vec3>,
+    /// `J`'s `k ≥ 1` part, per light, as `f_coeffs`.
+    pub multi_coeffs: Vec<Vec3>,
+    /// The part of `multi_coeffs` the walks carried through at least one
+    /// collision, per light, as `f_coeffs`.
+    pub scattered_coeffs: Vec<Vec3>,
+    /// The light arriving from each external light (in `Lights`' order,
+    /// suns first), per light.
+    pub arrival: Vec<Vec3>,
+    /// The energy each term `k = 0..=N` carries over all lights.
+    pub term_energy: Vec<Vec3>,
+}
+
 impl InternalLights {
     /// Places the lights, runs the walks and builds the indices. Returns
     /// `None` if `cancel` is set meanwhile.
@@ -387,42 +408,38 @@ impl InternalLights {
         }
         let t_walk = start.elapsed().as_secs_f64();
 
-        let mut out = Self::assemble(
-            vol,
-            external,
-            params,
+        let sources = LightSources {
             lights,
             f_coeffs,
             multi_coeffs,
             scattered_coeffs,
             arrival,
             term_energy,
-            density_integral,
-        );
+        };
+        let mut out = Self::assemble(vol, external, params, sources, density_integral);
         out.timings.walks = t_walk;
         Some(out)
     }
 
     /// Builds the kernel radius and the spatial indices around lights whose
-    /// sources are known: `f_coeffs`, `multi_coeffs` and `scattered_coeffs`
-    /// (the part of `multi_coeffs` the walks carried through at least one
-    /// collision) hold `(sh_order+1)²` SH coefficients per light, `arrival` the light
-    /// arriving from each external light (in `external`'s order, suns
-    /// first). [`InternalLights::build`] calls this after the walks; tests
-    /// call it with sources of their own.
-    #[allow(clippy::too_many_arguments)] // the parts of the cache
+    /// sources are known (see [`LightSources`]). [`InternalLights::build`]
+    /// calls this after the walks, the GPU walks after theirs; tests call
+    /// it with sources of their own.
     pub fn assemble<D: DensityField>(
         vol: &Volume<D>,
         external: &Lights,
         params: &InternalParams,
-        lights: Vec<InternalLight>,
-        f_coeffs: Vec<Vec3>,
-        multi_coeffs: Vec<Vec3>,
-        scattered_coeffs: Vec<Vec3>,
-        arrival: Vec<Vec3>,
-        term_energy: Vec<Vec3>,
+        sources: LightSources,
         density_integral: f32,
     ) -> Self {
+        let LightSources {
+            lights,
+            f_coeffs,
+            multi_coeffs,
+            scattered_coeffs,
+            arrival,
+            term_energy,
+        } = sources;
         let start = Instant::now();
         let m = lights.len().max(1);
         let order = params.sh_order.min(MAX_ORDER);
