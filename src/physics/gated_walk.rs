@@ -445,6 +445,21 @@ fn optical_depth_flight<D: DensityField>(
     // end, rate), so that a step is sampled once.
     let mut step = (f32::NAN, u32::MAX, 0.0f32, 0.0f32);
     let mut outcome = None;
+    // Marches the pending flights, then this one from its start to `to`
+    // against what is left to the gate.
+    let resolve_to = |lazy: &mut LazyClock, to: f32| {
+        let exact = lazy.resolve(vol);
+        march_clock(
+            vol,
+            Clock::OpticalDepth,
+            origin,
+            dir,
+            t_enter,
+            t_exit,
+            to,
+            gate_clock - exact,
+        )
+    };
     let mut drawn = -(1.0 - rng.next_f32()).ln();
     let mut tau = drawn;
     let completed = grid.walk(origin, dir, t_enter, t_exit, |a, b, m| {
@@ -485,17 +500,7 @@ fn optical_depth_flight<D: DensityField>(
                 bound += drawn;
                 if lazy.exact + bound >= gate_clock {
                     resolved = true;
-                    let exact = lazy.resolve(vol);
-                    match march_clock(
-                        vol,
-                        Clock::OpticalDepth,
-                        origin,
-                        dir,
-                        t_enter,
-                        t_exit,
-                        t,
-                        gate_clock - exact,
-                    ) {
+                    match resolve_to(lazy, t) {
                         ClockMarch::Reached(t_gate) => {
                             outcome = Some(Flight::Gate(t_gate));
                             return false;
@@ -537,17 +542,7 @@ fn optical_depth_flight<D: DensityField>(
     if lazy.exact + bound + (drawn - tau) < gate_clock {
         return Flight::Exit;
     }
-    let exact = lazy.resolve(vol);
-    match march_clock(
-        vol,
-        Clock::OpticalDepth,
-        origin,
-        dir,
-        t_enter,
-        t_exit,
-        t_exit,
-        gate_clock - exact,
-    ) {
+    match resolve_to(lazy, t_exit) {
         ClockMarch::Reached(t_gate) => Flight::Gate(t_gate),
         ClockMarch::Exhausted(_) => Flight::Exit,
     }
