@@ -156,29 +156,19 @@ pub fn build_internal_lights_gpu(
     let (lights, _) = unpack_placed(&placed_raw, m);
     let count = sh_count(params.sh_order.min(MAX_ORDER));
     let gates = params.terms as usize + 1;
-    let mut f_coeffs = Vec::with_capacity(m * count);
-    let mut multi_coeffs = Vec::with_capacity(m * count);
-    let mut scattered_coeffs = Vec::with_capacity(m * count);
-    let mut arrival = Vec::with_capacity(m * n_ext);
-    let mut term_energy = vec![Vec3::ZERO; gates];
     let v3 = |v: &[f32; 4]| Vec3::new(v[0], v[1], v[2]);
+    let mut sources = LightSources::with_capacity(lights, count, n_ext, gates);
     for record in out.chunks_exact(stride).take(m) {
-        f_coeffs.extend(record[..count].iter().map(v3));
-        multi_coeffs.extend(record[count..2 * count].iter().map(v3));
-        scattered_coeffs.extend(record[2 * count..3 * count].iter().map(v3));
-        arrival.extend(record[3 * count..3 * count + n_ext].iter().map(v3));
-        for (e, v) in term_energy.iter_mut().zip(&record[3 * count + n_ext..]) {
-            *e += v3(v);
-        }
+        let (sh, rest) = record.split_at(3 * count);
+        let (arrival, energy) = rest.split_at(n_ext);
+        sources.push(
+            sh[..count].iter().map(v3),
+            sh[count..2 * count].iter().map(v3),
+            sh[2 * count..].iter().map(v3),
+            arrival.iter().map(v3),
+            energy.iter().map(v3),
+        );
     }
-    let sources = LightSources {
-        lights,
-        f_coeffs,
-        multi_coeffs,
-        scattered_coeffs,
-        arrival,
-        term_energy,
-    };
     let mut lights_out = InternalLights::assemble(
         &prepared.volume,
         &prepared.lights,

@@ -394,6 +394,29 @@ mod tests {
     use crate::physics::sh::sh_count;
     use crate::physics::volume::Optics;
 
+    /// Parameters of the tests' hand-built caches: order-1 SH, one light
+    /// and one walk unless changed, no uniform mix, seed 0.
+    fn sh1_params(
+        clock: Clock,
+        s_star: f32,
+        terms: u32,
+        kernel_radius: f32,
+        l1: L1Form,
+    ) -> InternalParams {
+        InternalParams {
+            s_star,
+            lights: 1,
+            terms,
+            walks: 1,
+            sh_order: 1,
+            kernel_radius: Some(kernel_radius),
+            uniform_mix: 0.0,
+            clock,
+            l1,
+            seed: 0,
+        }
+    }
+
     /// Density 1 in the cube [−1, 1]³.
     struct Cube;
 
@@ -472,18 +495,7 @@ mod tests {
             (Clock::Geometric, s_geo),
             (Clock::OpticalDepth, sigma * s_geo),
         ] {
-            let params = InternalParams {
-                s_star,
-                lights: 1,
-                terms: 1,
-                walks: 1,
-                sh_order: 1,
-                kernel_radius: Some(h),
-                uniform_mix: 0.0,
-                clock,
-                l1: L1Form::Points,
-                seed: 0,
-            };
+            let params = sh1_params(clock, s_star, 1, h, L1Form::Points);
             let count = sh_count(1);
             let mut multi = vec![Vec3::ZERO; count];
             multi[0] = j0 * (2.0 * std::f32::consts::PI.sqrt());
@@ -568,16 +580,8 @@ mod tests {
                 Clock::OpticalDepth => s_geo * sigma,
             };
             let params = InternalParams {
-                s_star,
                 lights: lights.len(),
-                terms: 1,
-                walks: 1,
-                sh_order: 1,
-                kernel_radius: Some(0.25),
-                uniform_mix: 0.0,
-                clock,
-                l1: L1Form::Field,
-                seed: 0,
+                ..sh1_params(clock, s_star, 1, 0.25, L1Form::Field)
             };
             let count = sh_count(1);
             let mut multi = vec![Vec3::ZERO; count * lights.len()];
@@ -671,18 +675,7 @@ mod tests {
                 (Clock::Geometric, s_geo),
                 (Clock::OpticalDepth, sigma * s_geo),
             ] {
-                let params = InternalParams {
-                    s_star,
-                    lights: 1,
-                    terms,
-                    walks: 1,
-                    sh_order: 1,
-                    kernel_radius: Some(0.1),
-                    uniform_mix: 0.0,
-                    clock,
-                    l1: L1Form::Points,
-                    seed: 0,
-                };
+                let params = sh1_params(clock, s_star, terms, 0.1, L1Form::Points);
                 let count = sh_count(1);
                 let cache = InternalLights::assemble(
                     &vol,

@@ -233,6 +233,46 @@ pub struct LightSources {
     pub term_energy: Vec<Vec3>,
 }
 
+impl LightSources {
+    /// Room for the sources of `lights`, each with `count` SH coefficients
+    /// per set, `n_ext` arrival values and `gates` terms of energy.
+    pub fn with_capacity(
+        lights: Vec<InternalLight>,
+        count: usize,
+        n_ext: usize,
+        gates: usize,
+    ) -> Self {
+        let m = lights.len();
+        Self {
+            lights,
+            f_coeffs: Vec::with_capacity(m * count),
+            multi_coeffs: Vec::with_capacity(m * count),
+            scattered_coeffs: Vec::with_capacity(m * count),
+            arrival: Vec::with_capacity(m * n_ext),
+            term_energy: vec![Vec3::ZERO; gates],
+        }
+    }
+
+    /// Appends the next light's `F`, `J`, collided part and arrival, in the
+    /// lights' order, and adds its energy per term to the totals.
+    pub fn push(
+        &mut self,
+        f: impl IntoIterator<Item = Vec3>,
+        multi: impl IntoIterator<Item = Vec3>,
+        scattered: impl IntoIterator<Item = Vec3>,
+        arrival: impl IntoIterator<Item = Vec3>,
+        energy: impl IntoIterator<Item = Vec3>,
+    ) {
+        self.f_coeffs.extend(f);
+        self.multi_coeffs.extend(multi);
+        self.scattered_coeffs.extend(scattered);
+        self.arrival.extend(arrival);
+        for (e, v) in self.term_energy.iter_mut().zip(energy) {
+            *e += v;
+        }
+    }
+}
+
 impl InternalLights {
     /// Places the lights, runs the walks and builds the indices. Returns
     /// `None` if `cancel` is set meanwhile.
@@ -289,7 +329,6 @@ impl InternalLights {
         density_integral: f32,
         cancel: &AtomicBool,
     ) -> Option<Self> {
-        let m = lights.len();
         let start = Instant::now();
         let order = params.sh_order.min(MAX_ORDER);
         let count = sh_count(order);
@@ -392,30 +431,12 @@ impl InternalLights {
         if cancel.load(Ordering::Relaxed) {
             return None;
         }
-        let mut f_coeffs = Vec::with_capacity(m * count);
-        let mut multi_coeffs = Vec::with_capacity(m * count);
-        let mut scattered_coeffs = Vec::with_capacity(m * count);
-        let mut arrival = Vec::with_capacity(m * n_ext);
-        let mut term_energy = vec![Vec3::ZERO; terms + 1];
+        let mut sources = LightSources::with_capacity(lights, count, n_ext, terms + 1);
         for w in walked.into_iter().flatten() {
-            f_coeffs.extend_from_slice(&w.f);
-            multi_coeffs.extend_from_slice(&w.multi);
-            scattered_coeffs.extend_from_slice(&w.scattered);
-            arrival.extend_from_slice(&w.arrival);
-            for (e, v) in term_energy.iter_mut().zip(&w.energy) {
-                *e += *v;
-            }
+            sources.push(w.f, w.multi, w.scattered, w.arrival, w.energy);
         }
         let t_walk = start.elapsed().as_secs_f64();
 
-        let sources = LightSources {
-            lights,
-            f_coeffs,
-            multi_coeffs,
-            scattered_coeffs,
-            arrival,
-            term_energy,
-        };
         let mut out = Self::assemble(vol, external, params, sources, density_integral);
         out.timings.walks = t_walk;
         Some(out)

@@ -2,8 +2,8 @@
 //! grid: the one tracking loop that every estimator calls (METHOD.md §2,
 //! §4), in the manner of pbrt-v4's `SampleT_maj`.
 //!
-//! - [`sample_tentative`]: exponential steps against the local majorant,
-//!   calling back at each tentative collision.
+//! - [`sample_tentative`]: exponential steps ([`TentativeSteps`]) against
+//!   the local majorant, calling back at each tentative collision.
 //! - [`free_flight`]: spectral tracking (Kutz et al. 2017, with the
 //!   "max" probabilities of its history-aware variant) for RGB extinction;
 //!   reduces to plain delta tracking when the channels agree.
@@ -30,25 +30,77 @@ pub fn sample_tentative(
     rng: &mut Rng,
     mut event: impl FnMut(f32, f32, &mut Rng) -> bool,
 ) -> bool {
-    let mut tau = -(1.0 - rng.next_f32()).ln();
+    let mut steps = TentativeSteps::new(rng);
     grid.walk(origin, dir, t0, t1, |a, b, m| {
-        if m <= 0.0 {
-            return true;
-        }
         let mut t = a;
-        loop {
-            let seg_tau = m * (b - t);
-            if tau >= seg_tau {
-                tau -= seg_tau;
-                return true;
-            }
-            t += tau / m;
-            if !event(t, m, rng) {
+        while let Some(t_event) = steps.next(t, b, m) {
+            if !event(t_event, m, rng) {
                 return false;
             }
-            tau = -(1.0 - rng.next_f32()).ln();
+            steps.redraw(rng);
+            t = t_event;
         }
+        true
     })
+}
+
+/// The exponential steps between tentative collisions against a majorant
+/// that is constant in each cell: the state [`sample_tentative`] keeps
+/// while it walks the cells, for a loop that walks them itself (the walks'
+/// flights, which count their clock in the same traversal).
+#[derive(Clone, Copy, Debug)]
+pub struct TentativeSteps {
+    /// The majorant optical depth of the current step.
+    drawn: f32,
+    /// What is left of it.
+    left: f32,
+}
+
+impl TentativeSteps {
+    /// The first step.
+    #[inline]
+    pub fn new(rng: &mut Rng) -> Self {
+        let drawn = -(1.0 - rng.next_f32()).ln();
+        Self { drawn, left: drawn }
+    }
+
+    /// The next tentative collision in the stretch `[t, b]` of a cell of
+    /// majorant `m`, or `None` having used up the stretch.
+    #[inline]
+    pub fn next(&mut self, t: f32, b: f32, m: f32) -> Option<f32> {
+        if m <= 0.0 {
+            return None;
+        }
+        let seg = m * (b - t);
+        if self.left >= seg {
+            self.left -= seg;
+            None
+        } else {
+            Some(t + self.left / m)
+        }
+    }
+
+    /// Draws the step after a tentative collision.
+    #[inline]
+    pub fn redraw(&mut self, rng: &mut Rng) {
+        self.drawn = -(1.0 - rng.next_f32()).ln();
+        self.left = self.drawn;
+    }
+
+    /// The majorant optical depth of the current step: at a tentative
+    /// collision, from the previous one (or the start) to it — an upper
+    /// bound of the optical depth there.
+    #[inline]
+    pub fn depth(&self) -> f32 {
+        self.drawn
+    }
+
+    /// The majorant optical depth used since the last tentative collision
+    /// (or the start).
+    #[inline]
+    pub fn used(&self) -> f32 {
+        self.drawn - self.left
+    }
 }
 
 /// Spectral tracking from `origin` along `dir` over `[t0, t1]`. Returns the
