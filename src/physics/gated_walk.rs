@@ -502,10 +502,10 @@ impl LazyClock {
 /// marched ([`march_clock`]), and from there the clock advances with the
 /// tracking, on the lattice [`march_clock`] would use from `t_enter`
 /// ([`ClockLattice`]: a step's density is sampled once however many
-/// tentative collisions fall in it), stopping at the
-/// gate if it comes before the next tentative collision. Tentative
-/// collisions past the gate are never drawn into the weight, so this is the
-/// same estimator as tracking to the gate: flights are memoryless.
+/// tentative collisions fall in it), stopping at the gate if it comes
+/// before the next tentative collision. Tentative collisions past the gate
+/// are never drawn into the weight, so this is the same estimator as
+/// tracking to the gate: flights are memoryless.
 #[allow(clippy::too_many_arguments)] // one flight: ray, span, gate, state
 fn optical_depth_flight<D: DensityField>(
     vol: &Volume<D>,
