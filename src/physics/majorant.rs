@@ -19,6 +19,8 @@ pub struct MajorantGrid {
     pub max: Vec3,
     /// Upper bound of the extinction in each cell, x fastest.
     pub values: Vec<f32>,
+    /// The extent of one cell, `(max − min) / res`.
+    pub cell: Vec3,
 }
 
 impl MajorantGrid {
@@ -47,6 +49,7 @@ impl MajorantGrid {
             min,
             max,
             values,
+            cell,
         }
     }
 
@@ -71,52 +74,62 @@ impl MajorantGrid {
         if t_max <= t_min {
             return true;
         }
-        let size = self.max - self.min;
         let res_f = self.res.as_vec3();
-        let cell_size = size / res_f;
+        let cell_size = self.cell;
         let p = origin + dir * t_min;
         // Clamped to `≥ 0` first, truncation is the floor (one instruction
         // instead of a libm call per walk: 2 % of the re-sampling time).
         let c = ((p - self.min) / cell_size).max(Vec3::ZERO);
-        let mut cell = c.min(res_f - Vec3::ONE).as_ivec3();
+        let cell = c.min(res_f - Vec3::ONE).as_ivec3();
+        let res = self.res.as_ivec3();
+        // Per axis: the ray parameter of the next cell boundary, the step
+        // between boundaries, the cell index step and the linear index
+        // stride, and how many cells are left before the grid's edge.
+        let strides = [1, res.x, res.x * res.y];
         let mut t_next = [0.0f32; 3];
         let mut dt = [0.0f32; 3];
-        let mut step = [0i32; 3];
+        let mut stride = [0isize; 3];
+        let mut left = [0i32; 3];
         for a in 0..3 {
             let d = dir[a];
             if d.abs() < 1e-30 {
                 t_next[a] = f32::INFINITY;
                 dt[a] = f32::INFINITY;
-                step[a] = 0;
+                left[a] = i32::MAX;
             } else if d > 0.0 {
                 let edge = self.min[a] + (cell[a] + 1) as f32 * cell_size[a];
                 t_next[a] = t_min + (edge - p[a]) / d;
                 dt[a] = cell_size[a] / d;
-                step[a] = 1;
+                stride[a] = strides[a] as isize;
+                left[a] = res[a] - 1 - cell[a];
             } else {
                 let edge = self.min[a] + cell[a] as f32 * cell_size[a];
                 t_next[a] = t_min + (edge - p[a]) / d;
                 dt[a] = -cell_size[a] / d;
-                step[a] = -1;
+                stride[a] = -(strides[a] as isize);
+                left[a] = cell[a];
             }
         }
-        let res = self.res.as_ivec3();
+        let [mut tx, mut ty, mut tz] = t_next;
+        let [mut lx, mut ly, mut lz] = left;
+        let mut idx = (cell.x + res.x * (cell.y + res.y * cell.z)) as isize;
         let mut t = t_min;
+        // One cell per iteration, leaving it through the nearest boundary
+        // (ties go to the later axis, as a three-way `min` would).
         loop {
-            let axis = if t_next[0] < t_next[1] {
-                if t_next[0] < t_next[2] {
-                    0
+            let m = self.values[idx as usize];
+            let (t_cross, axis) = if tx < ty {
+                if tx < tz {
+                    (tx, 0)
                 } else {
-                    2
+                    (tz, 2)
                 }
-            } else if t_next[1] < t_next[2] {
-                1
+            } else if ty < tz {
+                (ty, 1)
             } else {
-                2
+                (tz, 2)
             };
-            let t_exit = t_next[axis].min(t_max);
-            let idx = (cell.x + res.x * (cell.y + res.y * cell.z)) as usize;
-            let m = self.values[idx];
+            let t_exit = t_cross.min(t_max);
             if t_exit > t && !segment(t, t_exit, m) {
                 return false;
             }
@@ -124,11 +137,27 @@ impl MajorantGrid {
                 return true;
             }
             t = t_exit;
-            cell[axis] += step[axis];
-            if cell[axis] < 0 || cell[axis] >= res[axis] {
+            let cells_left = match axis {
+                0 => {
+                    tx += dt[0];
+                    lx -= 1;
+                    lx
+                }
+                1 => {
+                    ty += dt[1];
+                    ly -= 1;
+                    ly
+                }
+                _ => {
+                    tz += dt[2];
+                    lz -= 1;
+                    lz
+                }
+            };
+            if cells_left < 0 {
                 return true;
             }
-            t_next[axis] += dt[axis];
+            idx += stride[axis];
         }
     }
 }
