@@ -8,9 +8,20 @@
 const CLOCK_GEOMETRIC: u32 = 0u;
 const CLOCK_OPTICAL_DEPTH: u32 = 1u;
 
-// Lattice steps per majorant cell for the optical-depth quadrature
-// (`CLOCK_STEPS_PER_CELL`).
-const CLOCK_STEPS_PER_CELL: f32 = 2.0;
+// The fraction of the window `s*` above which a majorant cell's majorant
+// optical depth makes the optical-depth quadrature take two lattice steps
+// in the cell instead of one (`CLOCK_SPLIT_WINDOW`).
+const CLOCK_SPLIT_WINDOW: f32 = 0.25;
+
+// The quadrature step in a majorant cell of extinction majorant `m` under
+// the window `s_star`, `cell` being the cell's smallest extent
+// (`clock_step`).
+fn clock_step(cell: f32, m: f32, s_star: f32) -> f32 {
+    if m * cell > CLOCK_SPLIT_WINDOW * s_star {
+        return 0.5 * cell;
+    }
+    return cell;
+}
 
 // Most gates a walk on the GPU records, `N + 1` (a private array per
 // invocation; keep in sync with `GPU_MAX_TERMS` in src/gpu/walks.rs, which
@@ -41,10 +52,12 @@ struct ClockMarch {
     reached: bool,
 }
 
-// Advances the clock along `origin + t dir` from `t0` (inside or on the box)
-// towards `t_stop ≤ t_exit` (`march_clock`).
+// Advances the clock (gating windows of `s_star`) along `origin + t dir`
+// from `t0` (inside or on the box) towards `t_stop ≤ t_exit`
+// (`march_clock`).
 fn march_clock(
     clock: u32,
+    s_star: f32,
     origin: vec3<f32>,
     dir: vec3<f32>,
     t0: f32,
@@ -65,7 +78,7 @@ fn march_clock(
     }
     let m = scene.medium;
     let cell = (m.majorant_max - m.majorant_min) / vec3<f32>(m.majorant_res);
-    let h = max(min(min(cell.x, cell.y), cell.z) / CLOCK_STEPS_PER_CELL, 1e-12);
+    let cell_min = max(min(min(cell.x, cell.y), cell.z), 1e-12);
     let sigma_g = max_element(m.sigma_t);
     var acc = 0.0;
     var it = dda_start(origin, dir, t0, t_exit);
@@ -83,6 +96,7 @@ fn march_clock(
         }
         let a = seg.t0;
         let b = seg.t1;
+        let h = clock_step(cell_min, seg.majorant, s_star);
         var i = 0u;
         loop {
             let p0 = a + f32(i) * h;
@@ -204,14 +218,18 @@ fn accumulate_j_from(
         // `optical_depth_flight`: the same clock on the same lattice, and
         // the same estimator). Here the flight marches to the gate and
         // again to the collision.
-        let march = march_clock(settings.clock, origin, dir, clip.t0, clip.t1, clip.t1, budget);
+        let march = march_clock(
+            settings.clock, settings.s_star, origin, dir, clip.t0, clip.t1, clip.t1, budget,
+        );
         var flight_end = clip.t1;
         if march.reached {
             flight_end = march.value;
         }
         let flight = free_flight(origin, dir, clip.t0, flight_end, &weight, rng);
         if flight.hit {
-            let to_hit = march_clock(settings.clock, origin, dir, clip.t0, clip.t1, flight.t, BIG);
+            let to_hit = march_clock(
+                settings.clock, settings.s_star, origin, dir, clip.t0, clip.t1, flight.t, BIG,
+            );
             var advanced = 0.0;
             if !to_hit.reached {
                 advanced = to_hit.value;

@@ -35,7 +35,7 @@ fn clock_to(clock: u32, origin: vec3<f32>, dir: vec3<f32>, t: f32, t_exit: f32) 
     if clock == CLOCK_GEOMETRIC {
         return t;
     }
-    let m = march_clock(clock, origin, dir, 0.0, t_exit, t, BIG);
+    let m = march_clock(clock, gather_params.s_star, origin, dir, 0.0, t_exit, t, BIG);
     if m.reached {
         return BIG;
     }
@@ -82,7 +82,9 @@ fn single_beyond_window(
     // The clock is at `s*` at the window's end: march on from there (not
     // again from `x`) for the remaining `N s*`.
     let budget = gather_params.s_star * f32(terms);
-    let em = march_clock(gather_params.clock, x, dir, window, len, len, budget);
+    let em = march_clock(
+        gather_params.clock, gather_params.s_star, x, dir, window, len, len, budget,
+    );
     let end = select(len, em.value, em.reached);
     if end <= window {
         return vec3<f32>(0.0);
@@ -119,7 +121,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     let s_star = gather_params.s_star;
     let clock = gather_params.clock;
     // The window's end along the ray.
-    let wm = march_clock(clock, x, dir, 0.0, len, len, s_star);
+    let wm = march_clock(clock, s_star, x, dir, 0.0, len, len, s_star);
     let window = select(len, wm.value, wm.reached);
     if window <= 0.0 {
         return out;
@@ -318,7 +320,7 @@ fn field_l1_at(
         return vec3<f32>(0.0);
     }
     let exit = bc.t1;
-    let m = march_clock(clock, y, back, 0.0, exit, exit, budget);
+    let m = march_clock(clock, gather_params.s_star, y, back, 0.0, exit, exit, budget);
     let r_max = select(exit, m.value, m.reached);
     if r_max <= 0.0 {
         return vec3<f32>(0.0);

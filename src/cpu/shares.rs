@@ -53,7 +53,17 @@ pub fn light_shares<D: DensityField>(
     let x = eye + dir * t_in;
     let len = t_out - t_in;
     let clock = cache.params.clock;
-    let window = match march_clock(vol, clock, x, dir, 0.0, len, len, cache.s_star) {
+    let window = match march_clock(
+        vol,
+        clock,
+        cache.s_star,
+        x,
+        dir,
+        0.0,
+        len,
+        len,
+        cache.s_star,
+    ) {
         ClockMarch::Reached(t) => t,
         ClockMarch::Exhausted(_) => len,
     };

@@ -83,6 +83,7 @@ impl GatherSample {
 fn clock_to<D: DensityField>(
     vol: &Volume<D>,
     clock: Clock,
+    s_star: f32,
     origin: Vec3,
     dir: Vec3,
     t: f32,
@@ -91,7 +92,17 @@ fn clock_to<D: DensityField>(
     match clock {
         Clock::Geometric => t,
         Clock::OpticalDepth => {
-            match march_clock(vol, clock, origin, dir, 0.0, t_exit, t, f32::INFINITY) {
+            match march_clock(
+                vol,
+                clock,
+                s_star,
+                origin,
+                dir,
+                0.0,
+                t_exit,
+                t,
+                f32::INFINITY,
+            ) {
                 ClockMarch::Exhausted(d) => d,
                 ClockMarch::Reached(_) => f32::INFINITY,
             }
@@ -125,7 +136,17 @@ fn single_beyond_window<D: DensityField>(
     // The clock is at `s*` at the window's end: march on from there (not
     // again from `x`) for the remaining `N s*`.
     let budget = cache.s_star * terms as f32;
-    let end = match march_clock(vol, cache.params.clock, x, dir, window, len, len, budget) {
+    let end = match march_clock(
+        vol,
+        cache.params.clock,
+        cache.s_star,
+        x,
+        dir,
+        window,
+        len,
+        len,
+        budget,
+    ) {
         ClockMarch::Reached(t) => t,
         ClockMarch::Exhausted(_) => len,
     };
@@ -179,7 +200,7 @@ pub fn gather<D: DensityField>(
     let s_star = cache.s_star;
     let clock = cache.params.clock;
     // The window's end along the ray.
-    let window = match march_clock(vol, clock, x, dir, 0.0, len, len, s_star) {
+    let window = match march_clock(vol, clock, s_star, x, dir, 0.0, len, len, s_star) {
         ClockMarch::Reached(t) => t,
         ClockMarch::Exhausted(_) => len,
     };
@@ -304,14 +325,14 @@ pub fn gather<D: DensityField>(
         let within = match clock {
             Clock::Geometric => t + r <= s_star,
             Clock::OpticalDepth => {
-                let a = clock_to(vol, clock, x, dir, t, len);
+                let a = clock_to(vol, clock, s_star, x, dir, t, len);
                 if a > s_star {
                     false
                 } else {
                     let back = -n_light;
                     match vol.clip(y, back) {
                         Some((_, exit)) => {
-                            a + clock_to(vol, clock, y, back, r.min(exit), exit) <= s_star
+                            a + clock_to(vol, clock, s_star, y, back, r.min(exit), exit) <= s_star
                         }
                         None => true,
                     }
@@ -357,7 +378,7 @@ fn field_l1_at<D: DensityField>(
     rng: &mut Rng,
 ) -> Vec3 {
     let clock = cache.params.clock;
-    let budget = cache.s_star - clock_to(vol, clock, x, dir, t, len);
+    let budget = cache.s_star - clock_to(vol, clock, cache.s_star, x, dir, t, len);
     if budget <= 0.0 {
         return Vec3::ZERO;
     }
@@ -366,7 +387,7 @@ fn field_l1_at<D: DensityField>(
     let Some((_, exit)) = vol.clip(y, back) else {
         return Vec3::ZERO;
     };
-    let r_max = match march_clock(vol, clock, y, back, 0.0, exit, exit, budget) {
+    let r_max = match march_clock(vol, clock, cache.s_star, y, back, 0.0, exit, exit, budget) {
         ClockMarch::Reached(r) => r,
         ClockMarch::Exhausted(_) => exit,
     };
