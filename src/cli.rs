@@ -21,7 +21,7 @@ use crate::physics::internal::BuildTimings;
 use crate::render::export::write_image;
 use crate::render::film::image_mean;
 use crate::render::tonemap::ViewTransform;
-use crate::render::{internal_params, Film, Prepared};
+use crate::render::{internal_params, internal_params_for_set, light_set, Film, Prepared};
 use crate::scene::{ClockKind, InternalSettings, L1Kind, Method, RenderSettings, Scene};
 
 /// Lantern: multiple scattering as internal lights, live.
@@ -151,6 +151,11 @@ pub struct InternalArgs {
     /// Internal-light samples per camera sample.
     #[arg(long)]
     pub light_samples: Option<u32>,
+    /// Passes per set of internal lights; a fresh set (the seed's next)
+    /// after each such run of passes, so the walk noise averages out
+    /// (0: one set for the whole render).
+    #[arg(long)]
+    pub resample_every: Option<u32>,
 }
 
 impl InternalArgs {
@@ -185,6 +190,9 @@ impl InternalArgs {
         }
         if let Some(v) = self.light_samples {
             settings.light_samples = v;
+        }
+        if let Some(v) = self.resample_every {
+            settings.resample_every = v;
         }
     }
 }
@@ -450,6 +458,15 @@ fn render_command(
         bar.inc(1);
     }
     bar.finish_and_clear();
+    let sets = spp
+        .checked_sub(1)
+        .map_or(0, |last| light_set(&settings, last));
+    if method == Method::Internal && sets > 0 {
+        println!(
+            "{sets} more light sets (one every {} passes), walked within the render time below",
+            settings.internal.resample_every
+        );
+    }
     let secs = start.elapsed().as_secs_f64();
     let samples = w as f64 * h as f64 * film.samples as f64;
     write_image(out, w, h, &film.mean(), exposure, view)?;
@@ -537,7 +554,18 @@ fn render_gpu(
     let build_secs = t_build.elapsed().as_secs_f64();
     let bar = pass_bar(settings.spp);
     let start = Instant::now();
+    let mut set = 0;
+    let mut resample_secs = 0.0;
     for pass in 0..settings.spp {
+        if settings.method == Method::Internal && light_set(settings, pass) != set {
+            // A fresh light set, walked on the GPU like the first.
+            let t = Instant::now();
+            set = light_set(settings, pass);
+            let params = internal_params_for_set(prepared, settings, set);
+            let lights = build_internal_lights_gpu(&ctx, prepared, &params)?;
+            renderer.set_internal_lights(&lights, settings.internal.light_samples)?;
+            resample_secs += t.elapsed().as_secs_f64();
+        }
         renderer.add_pass(pass);
         // Waiting after each pass keeps the progress bar honest and the
         // queue short; the accumulation itself stays on the GPU.
@@ -545,6 +573,12 @@ fn render_gpu(
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if set > 0 {
+        println!(
+            "{} more light sets (one every {} passes) walked in {resample_secs:.2} s, included below",
+            set, settings.internal.resample_every
+        );
+    }
     let secs = start.elapsed().as_secs_f64();
     let image = renderer.read_back()?;
     let film = image.film();

@@ -312,7 +312,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
     );
     let _ = writeln!(
         report,
-        "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}\n",
+        "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}, {}\n",
         i.lights,
         i.walks,
         i.terms,
@@ -320,7 +320,11 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
             .map_or("scene default".to_owned(), |s| s.to_string()),
         i.sh_order,
         i.clock,
-        i.l1
+        i.l1,
+        match i.resample_every {
+            0 => "one light set".to_owned(),
+            p => format!("a fresh light set every {p} passes"),
+        }
     );
     let _ = writeln!(
         report,

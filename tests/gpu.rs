@@ -19,7 +19,8 @@
 //!
 //! - With an adapter: the internal lights built on the GPU (placement,
 //!   walks, a gather with them) against the CPU; see the section at the
-//!   end of this file.
+//!   end of this file, and a renewed light set replacing the GPU gather's
+//!   lights mid-render (`renewed_light_set_replaces_the_gpu_lights`).
 //!
 //! Without an adapter the GPU cases print a notice and pass, unless
 //! `LANTERN_REQUIRE_GPU=1` (set in CI, where lavapipe provides one).
@@ -1023,4 +1024,64 @@ fn gpu_walks_refuse_what_they_cannot_hold() {
         msg.contains("walk results") && msg.contains("max_"),
         "{msg}"
     );
+}
+
+/// A renewed light set on the GPU (`set_internal_lights`, as the CLI and
+/// the previewer use it every `resample_every` passes) gathers the passes
+/// after it from the new lights and keeps what has accumulated: 8 passes
+/// with set 0, then 8 with set 1, give the mean of the two 8-pass renders
+/// with each set alone (the same per-pass random streams), to float
+/// rounding; and differ from 16 passes with set 0 alone (the sets differ:
+/// 256 lights of one walk each).
+#[test]
+fn renewed_light_set_replaces_the_gpu_lights() {
+    let Some(ctx) = common::gpu() else { return };
+    let prepared = Arc::new(common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
+        s.camera.width = 16;
+        s.camera.height = 16;
+        s.render.internal.lights = 256;
+        s.render.internal.walks = 1;
+    }));
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    let never = AtomicBool::new(false);
+    let set = |k| {
+        let params = lantern::render::internal_params_for_set(&prepared, &settings, k);
+        InternalLights::build(&prepared.volume, &prepared.lights, &params, &never).unwrap()
+    };
+    let (first, second) = (set(0), set(1));
+    let samples = settings.internal.light_samples;
+    let gather = |lights: &InternalLights, passes: std::ops::Range<u32>| {
+        let mut r = GpuRenderer::internal(&ctx, &prepared, lights, samples, 5)
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        for pass in passes {
+            r.add_pass(pass);
+        }
+        r
+    };
+    let mut renewed = gather(&first, 0..8);
+    renewed
+        .set_internal_lights(&second, samples)
+        .unwrap_or_else(|e| panic!("{e:#}"));
+    for pass in 8..16 {
+        renewed.add_pass(pass);
+    }
+    let read = |r: &GpuRenderer| r.read_back().unwrap_or_else(|e| panic!("{e:#}")).film();
+    let renewed = read(&renewed);
+    let (a, b) = (read(&gather(&first, 0..8)), read(&gather(&second, 8..16)));
+    let kept = read(&gather(&first, 0..16));
+    assert_eq!(renewed.samples, 16);
+    let scale = lantern::render::film::image_mean(&kept.mean()).max_element();
+    let (mut worst_same, mut worst_kept) = (0.0f32, 0.0f32);
+    for i in 0..renewed.mean().len() {
+        let expected = (a.mean()[i] + b.mean()[i]) * 0.5;
+        worst_same = worst_same.max((renewed.mean()[i] - expected).abs().max_element());
+        worst_kept = worst_kept.max((renewed.mean()[i] - kept.mean()[i]).abs().max_element());
+    }
+    println!(
+        "renewed light set on the GPU: largest difference from the two halves {:.2e}, from set 0 alone {:.2e} (image mean {scale:.4})",
+        worst_same, worst_kept
+    );
+    assert!(worst_same <= 1e-4 * scale, "{worst_same} vs {scale}");
+    assert!(worst_kept > 0.05 * scale, "{worst_kept} vs {scale}");
 }

@@ -2,12 +2,14 @@
 //! pixel, for both estimators. Every pixel's random stream depends only on
 //! (seed, pixel, pass), so an image reproduces whatever the number of
 //! threads. A [`Renderer`] owns what a render needs between passes: the
-//! prepared scene and, for the internal-lights method, the cached lights.
+//! prepared scene and, for the internal-lights method, the cached lights —
+//! renewed every `resample_every` passes when the settings ask for it, so
+//! that the walk noise averages out over the sets.
 
 pub mod shares;
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError};
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -16,7 +18,7 @@ use crate::physics::gather::gather;
 use crate::physics::internal::InternalLights;
 use crate::physics::reference::radiance_split;
 use crate::physics::rng::Rng;
-use crate::render::{internal_params, Film, Prepared};
+use crate::render::{internal_params, internal_params_for_set, light_set, Film, Prepared};
 use crate::scene::{Method, RenderSettings};
 
 /// One pass (one sample per pixel), by part. Rows top to bottom.
@@ -36,7 +38,11 @@ pub struct PassImage {
 pub struct Renderer {
     prepared: Arc<Prepared>,
     settings: RenderSettings,
+    /// Light set 0 (internal-lights method only).
     internal: Option<Arc<InternalLights>>,
+    /// The latest later light set and its number, built when a pass first
+    /// needs it.
+    later: Mutex<Option<(u32, Arc<InternalLights>)>>,
 }
 
 impl Renderer {
@@ -63,11 +69,12 @@ impl Renderer {
             prepared,
             settings: settings.clone(),
             internal,
+            later: Mutex::new(None),
         })
     }
 
     /// A renderer that reuses already built internal lights (which must
-    /// belong to `prepared` and `settings`).
+    /// belong to `prepared` and `settings`: they are light set 0).
     pub fn with_lights(
         prepared: Arc<Prepared>,
         settings: &RenderSettings,
@@ -77,6 +84,7 @@ impl Renderer {
             prepared,
             settings: settings.clone(),
             internal,
+            later: Mutex::new(None),
         }
     }
 
@@ -90,7 +98,8 @@ impl Renderer {
         &self.settings
     }
 
-    /// The cached internal lights (internal-lights method only).
+    /// The cached internal lights, light set 0 (internal-lights method
+    /// only).
     pub fn internal_lights(&self) -> Option<&InternalLights> {
         self.internal.as_deref()
     }
@@ -100,11 +109,42 @@ impl Renderer {
         self.internal.as_ref()
     }
 
+    /// The internal lights that render pass `pass` (`Some(None)` for the
+    /// reference method): light set 0, or the pass's later set, built here
+    /// the first time a pass needs it. `None` if `cancel` is set while it
+    /// is built.
+    pub fn lights_for_pass(
+        &self,
+        pass: u32,
+        cancel: &AtomicBool,
+    ) -> Option<Option<Arc<InternalLights>>> {
+        let Some(first) = &self.internal else {
+            return Some(None);
+        };
+        let set = light_set(&self.settings, pass);
+        if set == 0 {
+            return Some(Some(first.clone()));
+        }
+        let mut later = self.later.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some((built, lights)) = &*later {
+            if *built == set {
+                return Some(Some(lights.clone()));
+            }
+        }
+        let params = internal_params_for_set(&self.prepared, &self.settings, set);
+        let p = &self.prepared;
+        let lights = Arc::new(InternalLights::build(
+            &p.volume, &p.lights, &params, cancel,
+        )?);
+        *later = Some((set, lights.clone()));
+        Some(Some(lights))
+    }
+
     /// One sample along the camera ray through film position `(px, py)`.
     #[inline]
-    fn sample(&self, dir: Vec3, rng: &mut Rng) -> (Vec3, Vec3) {
+    fn sample(&self, lights: Option<&InternalLights>, dir: Vec3, rng: &mut Rng) -> (Vec3, Vec3) {
         let p = &self.prepared;
-        match &self.internal {
+        match lights {
             None => radiance_split(&p.volume, &p.lights, p.camera.eye, dir, u32::MAX, rng),
             Some(cache) => {
                 let s = gather(
@@ -121,8 +161,11 @@ impl Renderer {
         }
     }
 
-    /// Renders pass number `pass`; `None` if `cancel` is set meanwhile.
+    /// Renders pass number `pass` (with the light set it falls in, see
+    /// [`Renderer::lights_for_pass`]); `None` if `cancel` is set meanwhile.
     pub fn pass(&self, pass: u32, cancel: &AtomicBool) -> Option<PassImage> {
+        let lights = self.lights_for_pass(pass, cancel)?;
+        let lights = lights.as_deref();
         let cam = &self.prepared.camera;
         let width = cam.width as usize;
         let n = width * cam.height as usize;
@@ -142,7 +185,7 @@ impl Renderer {
                     let mut rng = Rng::for_sample(seed, index, pass);
                     let (jx, jy) = (rng.next_f32(), rng.next_f32());
                     let dir = cam.ray_dir(x as f32 + jx, y as f32 + jy);
-                    let (t, s) = self.sample(dir, &mut rng);
+                    let (t, s) = self.sample(lights, dir, &mut rng);
                     row[x] = t;
                     row_single[x] = s;
                 }

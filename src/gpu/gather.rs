@@ -133,35 +133,60 @@ impl GpuRenderer {
         light_samples: u32,
         seed: u64,
     ) -> Result<Self, GpuError> {
-        use wgpu::util::DeviceExt;
-        let packed = pack_lights(cache, light_samples);
-        let params = ctx
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("gather uniform"),
-                contents: bytemuck::bytes_of(&packed.params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
-        let vec4 = storage_buffer(
-            ctx,
-            "internal lights (vec4 tables)",
-            bytemuck::cast_slice(&packed.vec4),
-            wgpu::BufferUsages::empty(),
-        )?;
-        let words = storage_buffer(
-            ctx,
-            "internal lights (index tables)",
-            bytemuck::cast_slice(&packed.words),
-            wgpu::BufferUsages::empty(),
-        )?;
-        let bytes = params.size() + vec4.size() + words.size();
+        let (buffers, bytes) = upload_lights(ctx, cache, light_samples)?;
+        let [params, vec4, words] = &buffers;
         Self::build(
             ctx,
             prepared,
             seed,
             &GATHER_MODULE,
-            &[(6, &params), (7, &vec4), (8, &words)],
+            &[(6, params), (7, vec4), (8, words)],
             bytes,
         )
     }
+
+    /// Gathers the passes still to come from another set of internal
+    /// lights of the same scene and parameters (a renewed light set, see
+    /// `InternalSettings::resample_every`), keeping what has accumulated.
+    pub fn set_internal_lights(
+        &mut self,
+        cache: &InternalLights,
+        light_samples: u32,
+    ) -> Result<(), GpuError> {
+        let (buffers, bytes) = upload_lights(&self.ctx, cache, light_samples)?;
+        let [params, vec4, words] = &buffers;
+        self.rebind_extra(&[(6, params), (7, vec4), (8, words)], bytes)
+    }
+}
+
+/// The gather's light buffers (uniform, vec4 tables, index tables) for
+/// `cache`, and their size in bytes.
+fn upload_lights(
+    ctx: &GpuContext,
+    cache: &InternalLights,
+    light_samples: u32,
+) -> Result<([wgpu::Buffer; 3], u64), GpuError> {
+    use wgpu::util::DeviceExt;
+    let packed = pack_lights(cache, light_samples);
+    let params = ctx
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("gather uniform"),
+            contents: bytemuck::bytes_of(&packed.params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+    let vec4 = storage_buffer(
+        ctx,
+        "internal lights (vec4 tables)",
+        bytemuck::cast_slice(&packed.vec4),
+        wgpu::BufferUsages::empty(),
+    )?;
+    let words = storage_buffer(
+        ctx,
+        "internal lights (index tables)",
+        bytemuck::cast_slice(&packed.words),
+        wgpu::BufferUsages::empty(),
+    )?;
+    let bytes = params.size() + vec4.size() + words.size();
+    Ok(([params, vec4, words], bytes))
 }

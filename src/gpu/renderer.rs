@@ -292,7 +292,7 @@ impl GpuImage {
 
 /// A progressive GPU renderer for one prepared scene and one estimator.
 pub struct GpuRenderer {
-    ctx: GpuContext,
+    pub(crate) ctx: GpuContext,
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     buffers: SceneBuffers,
@@ -302,6 +302,38 @@ pub struct GpuRenderer {
     seed: u64,
     samples: u32,
     label: &'static str,
+    /// Bytes of the `extra` buffers (counted in `buffers.bytes`).
+    extra_bytes: u64,
+}
+
+/// The bind group of a renderer's pipeline: the scene's buffers (bindings
+/// 0–4), the accumulation (5) and `extra` (binding, buffer) pairs.
+fn bind(
+    ctx: &GpuContext,
+    pipeline: &wgpu::ComputePipeline,
+    buffers: &SceneBuffers,
+    accum: &wgpu::Buffer,
+    extra: &[(u32, &wgpu::Buffer)],
+    label: &'static str,
+) -> Result<wgpu::BindGroup, GpuError> {
+    ctx.scoped("binding the renderer's buffers", || {
+        let mut entries = buffers.entries().to_vec();
+        entries.push(wgpu::BindGroupEntry {
+            binding: 5,
+            resource: accum.as_entire_binding(),
+        });
+        for &(binding, buffer) in extra {
+            entries.push(wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            });
+        }
+        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        })
+    })
 }
 
 impl GpuRenderer {
@@ -330,33 +362,17 @@ impl GpuRenderer {
         let accum_bytes = pixels * std::mem::size_of::<GpuAccum>() as u64;
         ctx.check_storage_size("accumulation buffer", accum_bytes)?;
         let label = module.name;
-        let (accum, bind_group) = ctx.scoped("allocating the accumulation buffer", || {
-            let accum = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        let accum = ctx.scoped("allocating the accumulation buffer", || {
+            ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size: accum_bytes.max(16),
                 usage: wgpu::BufferUsages::STORAGE
                     | wgpu::BufferUsages::COPY_SRC
                     | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
-            });
-            let mut entries = buffers.entries().to_vec();
-            entries.push(wgpu::BindGroupEntry {
-                binding: 5,
-                resource: accum.as_entire_binding(),
-            });
-            for &(binding, buffer) in extra {
-                entries.push(wgpu::BindGroupEntry {
-                    binding,
-                    resource: buffer.as_entire_binding(),
-                });
-            }
-            let bind_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some(label),
-                layout: &pipeline.get_bind_group_layout(0),
-                entries: &entries,
-            });
-            (accum, bind_group)
+            })
         })?;
+        let bind_group = bind(ctx, &pipeline, &buffers, &accum, extra, label)?;
         Ok(Self {
             ctx: ctx.clone(),
             pipeline,
@@ -368,7 +384,29 @@ impl GpuRenderer {
             seed,
             samples: 0,
             label,
+            extra_bytes,
         })
+    }
+
+    /// Binds other `extra` buffers (holding `extra_bytes`) for the passes
+    /// still to come, keeping what has accumulated: the internal lights of
+    /// a new light set.
+    pub(crate) fn rebind_extra(
+        &mut self,
+        extra: &[(u32, &wgpu::Buffer)],
+        extra_bytes: u64,
+    ) -> Result<(), GpuError> {
+        self.bind_group = bind(
+            &self.ctx,
+            &self.pipeline,
+            &self.buffers,
+            &self.accum,
+            extra,
+            self.label,
+        )?;
+        self.buffers.bytes = self.buffers.bytes - self.extra_bytes + extra_bytes;
+        self.extra_bytes = extra_bytes;
+        Ok(())
     }
 
     /// Samples per pixel accumulated so far (passes enqueued).

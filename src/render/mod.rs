@@ -12,4 +12,6 @@ pub mod prepared;
 pub mod tonemap;
 
 pub use film::Film;
-pub use prepared::{default_s_star, internal_params, Prepared, SceneVolume};
+pub use prepared::{
+    default_s_star, internal_params, internal_params_for_set, light_set, Prepared, SceneVolume,
+};

@@ -99,8 +99,31 @@ pub fn lights_of(lights: &[Light]) -> Lights {
 /// defaults resolved: `s*` is the diagonal of the medium's box for the
 /// geometric clock, and for the optical-depth clock the diagonal's optical
 /// depth at the box's mean density (`max(σ_t) · ρ̄ · diagonal`, with `ρ̄`
-/// from a 24³ midpoint rule).
+/// from a 24³ midpoint rule). These are the parameters of light set 0; see
+/// [`internal_params_for_set`].
 pub fn internal_params(prepared: &Prepared, settings: &RenderSettings) -> InternalParams {
+    internal_params_for_set(prepared, settings, 0)
+}
+
+/// Which set of internal lights renders pass `pass` (see
+/// `InternalSettings::resample_every`): 0 throughout when sets are not
+/// renewed.
+pub fn light_set(settings: &RenderSettings, pass: u32) -> u32 {
+    match settings.internal.resample_every {
+        0 => 0,
+        every => pass / every,
+    }
+}
+
+/// [`internal_params`] for light set `set`: the same parameters, with the
+/// seed of set 0 (the render's) advanced by `set` steps of the golden
+/// ratio (every stream hashes the whole seed, so the sets' placements and
+/// walks are independent).
+pub fn internal_params_for_set(
+    prepared: &Prepared,
+    settings: &RenderSettings,
+    set: u32,
+) -> InternalParams {
     let s = &settings.internal;
     let clock = match s.clock {
         ClockKind::Geometric => Clock::Geometric,
@@ -122,7 +145,9 @@ pub fn internal_params(prepared: &Prepared, settings: &RenderSettings) -> Intern
             L1Kind::Field => L1Form::Field,
             L1Kind::Points => L1Form::Points,
         },
-        seed: settings.seed,
+        seed: settings
+            .seed
+            .wrapping_add((set as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)),
     }
 }
 

@@ -67,6 +67,14 @@ pub struct InternalSettings {
     pub l1: L1Kind,
     /// Internal-light samples per camera sample in the final gather.
     pub light_samples: u32,
+    /// Passes rendered with one set of internal lights before a fresh set
+    /// (same parameters, the next seed of the render's seed) replaces it;
+    /// 0 keeps one set for the whole render. One set's walk noise is fixed
+    /// for all its passes, so with 0 the passes converge to the image of
+    /// those lights; with sets drawn afresh they converge to the method's
+    /// expectation over light sets, the walk noise averaging out like
+    /// pixel noise.
+    pub resample_every: u32,
 }
 
 impl Default for InternalSettings {
@@ -82,6 +90,7 @@ impl Default for InternalSettings {
             clock: ClockKind::OpticalDepth,
             l1: L1Kind::Field,
             light_samples: 2,
+            resample_every: 0,
         }
     }
 }

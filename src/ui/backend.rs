@@ -40,7 +40,7 @@ use crate::gpu::display::{read_accum, DisplayPass, ImageStats};
 use crate::gpu::{GpuContext, GpuError, GpuRenderer};
 use crate::physics::gated_walk::Clock;
 use crate::physics::internal::InternalLights;
-use crate::render::{Film, Prepared};
+use crate::render::{internal_params_for_set, light_set, Film, Prepared};
 use crate::scene::{Density, DensitySource, Method, Scene};
 
 pub use crate::scene::{ClockKind, InternalSettings};
@@ -454,6 +454,8 @@ impl LightsCache {
         scene.camera = crate::scene::Camera::default();
         scene.render.spp = 0;
         scene.render.method = Method::Internal;
+        // Light set 0 does not depend on how often later sets replace it.
+        scene.render.internal.resample_every = 0;
         (scene, job.scene_dir.clone())
     }
 }
@@ -792,12 +794,29 @@ impl JobContext<'_> {
         if let Some(c) = self.newer() {
             return Ok(Some(c));
         }
+        let internal_settings = settings_for(job, Estimator::Internal);
+        let mut set = 0;
         for pass in 0..job.max_spp {
             if self.cancel.load(Ordering::Relaxed) {
                 return Ok(self.next_command());
             }
             let start = Instant::now();
-            for (_, engine) in engines.iter_mut() {
+            for (e, engine) in engines.iter_mut() {
+                if *e == Estimator::Internal && light_set(&internal_settings, pass) != set {
+                    // A fresh light set (built on the CPU, as the first).
+                    set = light_set(&internal_settings, pass);
+                    let params = internal_params_for_set(prepared, &internal_settings, set);
+                    let Some(lights) = InternalLights::build(
+                        &prepared.volume,
+                        &prepared.lights,
+                        &params,
+                        self.cancel,
+                    ) else {
+                        return Ok(self.next_command());
+                    };
+                    engine
+                        .set_internal_lights(&lights, internal_settings.internal.light_samples)?;
+                }
                 engine.add_pass(pass);
             }
             gpu.ctx.wait_idle()?;

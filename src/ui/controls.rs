@@ -254,6 +254,19 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
             "Internal lights gathered per camera sample. More: less noise per pass, \
              slower passes.",
         );
+    ui.add(
+        Slider::new(&mut s.resample_every, 0..=1024)
+            .logarithmic(true)
+            .text("renew lights every"),
+    )
+    .on_hover_text(
+        "Passes rendered with one set of internal lights before a fresh set \
+             (the next seed) replaces it, the image keeping what it has \
+             accumulated. 0: one set for the whole render, whose walk noise (the \
+             blotches that K controls) stays in the image however long it refines; renewed \
+             sets average it out, at the cost of their walks. The gizmos show the \
+             first set.",
+    );
 }
 
 fn lights_ui(ui: &mut Ui, app: &mut LanternApp) {
