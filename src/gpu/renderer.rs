@@ -306,8 +306,31 @@ pub struct GpuRenderer {
     extra_bytes: u64,
 }
 
-/// The bind group of a renderer's pipeline: the scene's buffers (bindings
-/// 0–4), the accumulation (5) and `extra` (binding, buffer) pairs.
+/// The bind group of `pipeline`: the scene's buffers (bindings 0–4) and
+/// `extra` (binding, buffer) pairs.
+pub(crate) fn bind_group(
+    ctx: &GpuContext,
+    label: &str,
+    pipeline: &wgpu::ComputePipeline,
+    scene: &SceneBuffers,
+    extra: &[(u32, &wgpu::Buffer)],
+) -> wgpu::BindGroup {
+    let mut entries = scene.entries().to_vec();
+    for &(binding, buffer) in extra {
+        entries.push(wgpu::BindGroupEntry {
+            binding,
+            resource: buffer.as_entire_binding(),
+        });
+    }
+    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &entries,
+    })
+}
+
+/// A renderer's bind group: the scene's buffers, the accumulation
+/// (binding 5) and `extra`.
 fn bind(
     ctx: &GpuContext,
     pipeline: &wgpu::ComputePipeline,
@@ -316,23 +339,10 @@ fn bind(
     extra: &[(u32, &wgpu::Buffer)],
     label: &'static str,
 ) -> Result<wgpu::BindGroup, GpuError> {
+    let mut all = vec![(5, accum)];
+    all.extend_from_slice(extra);
     ctx.scoped("binding the renderer's buffers", || {
-        let mut entries = buffers.entries().to_vec();
-        entries.push(wgpu::BindGroupEntry {
-            binding: 5,
-            resource: accum.as_entire_binding(),
-        });
-        for &(binding, buffer) in extra {
-            entries.push(wgpu::BindGroupEntry {
-                binding,
-                resource: buffer.as_entire_binding(),
-            });
-        }
-        ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(label),
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        })
+        bind_group(ctx, label, pipeline, buffers, &all)
     })
 }
 

@@ -34,7 +34,7 @@ use super::context::{GpuContext, GpuError};
 use super::mirrors::{
     GpuPassParams, GpuPlacementParams, GpuWalkParams, CLOCK_GEOMETRIC, CLOCK_OPTICAL_DEPTH,
 };
-use super::renderer::{compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
+use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
 use crate::physics::gated_walk::Clock;
 use crate::physics::internal::{
@@ -212,28 +212,6 @@ fn dispatch(
         pass.dispatch_workgroups(groups, 1, 1);
     }
     ctx.queue.submit([encoder.finish()]);
-}
-
-/// The bind group of `pipeline`: the scene's entries 0–4 and `extra`.
-fn bind_group(
-    ctx: &GpuContext,
-    label: &str,
-    pipeline: &wgpu::ComputePipeline,
-    scene: &SceneBuffers,
-    extra: &[(u32, &wgpu::Buffer)],
-) -> wgpu::BindGroup {
-    let mut entries = scene.entries().to_vec();
-    for &(binding, buffer) in extra {
-        entries.push(wgpu::BindGroupEntry {
-            binding,
-            resource: buffer.as_entire_binding(),
-        });
-    }
-    ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &entries,
-    })
 }
 
 /// Uploads the scene and the placement grid and enqueues the placement.
