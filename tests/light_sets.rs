@@ -2,7 +2,8 @@
 //! noise is fixed for all the passes that use it, so with one set a render
 //! converges to the image of those lights; with sets drawn afresh the
 //! passes are independent samples of the method's expectation over light
-//! sets, and the walk noise averages out like pixel noise.
+//! sets, and the walk noise averages out like pixel noise. The sets share
+//! the placement density kept with the prepared scene.
 
 mod common;
 
@@ -83,4 +84,36 @@ fn renewed_light_sets_average_the_walk_noise_out() {
         render(&prepared, 3, 0, 4).mean()
     );
     assert_ne!(a.mean(), render(&prepared, 3, 0, 16).mean());
+}
+
+/// The placement density is kept with the prepared scene (renewed sets and
+/// parameter changes reuse it) and gives the very lights of an uncached
+/// build; a different uniform fraction `u` builds another.
+#[test]
+fn placement_density_is_kept_with_the_scene() {
+    let prepared = common::prepare("assets/scenes/puffs_grid.ron");
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    settings.internal.lights = 512;
+    settings.internal.walks = 2;
+    let never = std::sync::atomic::AtomicBool::new(false);
+    for set in 0..3 {
+        let params = lantern::render::internal_params_for_set(&prepared, &settings, set);
+        let cached = prepared.build_internal_lights(&params, &never).unwrap();
+        let fresh = lantern::physics::internal::InternalLights::build(
+            &prepared.volume,
+            &prepared.lights,
+            &params,
+            &never,
+        )
+        .unwrap();
+        let positions = |l: &lantern::physics::internal::InternalLights| {
+            l.lights.iter().map(|l| l.position).collect::<Vec<_>>()
+        };
+        assert_eq!(positions(&cached), positions(&fresh));
+        assert_eq!(cached.term_energy, fresh.term_energy);
+    }
+    let a = prepared.placement_density(0.0);
+    assert!(Arc::ptr_eq(&a, &prepared.placement_density(0.0)));
+    assert!(!Arc::ptr_eq(&a, &prepared.placement_density(0.25)));
 }

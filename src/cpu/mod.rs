@@ -57,12 +57,7 @@ impl Renderer {
             Method::Reference => None,
             Method::Internal => {
                 let params = internal_params(&prepared, settings);
-                Some(Arc::new(InternalLights::build(
-                    &prepared.volume,
-                    &prepared.lights,
-                    &params,
-                    cancel,
-                )?))
+                Some(Arc::new(prepared.build_internal_lights(&params, cancel)?))
             }
         };
         Some(Self {
@@ -132,10 +127,7 @@ impl Renderer {
             }
         }
         let params = internal_params_for_set(&self.prepared, &self.settings, set);
-        let p = &self.prepared;
-        let lights = Arc::new(InternalLights::build(
-            &p.volume, &p.lights, &params, cancel,
-        )?);
+        let lights = Arc::new(self.prepared.build_internal_lights(&params, cancel)?);
         *later = Some((set, lights.clone()));
         Some(Some(lights))
     }

@@ -8,8 +8,8 @@
 //!
 //! - Placement: the placement grid (`ρ` at the cell corners) and an alias
 //!   table over its cells depend on the medium only and are built on the
-//!   CPU ([`PlacementDensity`]) and uploaded; the sampling runs on the GPU,
-//!   one invocation per light (`shaders/placement/main.wgsl`), deterministic
+//!   CPU (`PlacementDensity`, kept with the prepared scene) and uploaded;
+//!   the sampling runs on the GPU, one invocation per light (`shaders/placement/main.wgsl`), deterministic
 //!   for a seed. Procedural and voxel media alike.
 //! - Walks: one workgroup of [`WALK_LANES`] invocations per light, one walk
 //!   per invocation and dispatch; `⌈K/64⌉` dispatches add their sums to
@@ -37,10 +37,7 @@ use super::mirrors::{
 use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
 use crate::physics::gated_walk::Clock;
-use crate::physics::internal::{
-    InternalLight, InternalLights, InternalParams, LightSources, PLACEMENT_RESOLUTION,
-};
-use crate::physics::placement::PlacementDensity;
+use crate::physics::internal::{InternalLight, InternalLights, InternalParams, LightSources};
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::sh::{sh_count, MAX_ORDER};
 use crate::render::Prepared;
@@ -88,7 +85,7 @@ struct Build {
 /// Places `params.lights` lights on the GPU for `prepared`'s medium with
 /// `params.uniform_mix` and `params.seed`, and reads them back (the first
 /// half of [`build_internal_lights_gpu`]; the tests check it against
-/// [`PlacementDensity`]).
+/// [`PlacementDensity`](crate::physics::placement::PlacementDensity)).
 pub fn place_lights_gpu(
     ctx: &GpuContext,
     prepared: &Prepared,
@@ -220,7 +217,6 @@ fn place(
     prepared: &Prepared,
     params: &InternalParams,
 ) -> Result<Build, GpuError> {
-    let vol = &prepared.volume;
     let m = params.lights.max(1);
     let light_count = u32::try_from(m)
         .ok()
@@ -230,12 +226,7 @@ fn place(
             value: m as u64,
             max: (MAX_GROUPS * PLACEMENT_LANES) as u64,
         })?;
-    let density = PlacementDensity::build(
-        &vol.density,
-        vol.bounds,
-        PLACEMENT_RESOLUTION,
-        params.uniform_mix,
-    );
+    let density = prepared.placement_density(params.uniform_mix);
     let (threshold, alias) = density.alias_table();
     let mut table: Vec<[u32; 2]> = threshold
         .iter()

@@ -49,7 +49,7 @@ use super::gated_walk::{accumulate_j_from, Clock, GateSettings};
 use super::light_index::LightGrid;
 use super::lights::Lights;
 use super::phase;
-use super::placement::place_lights;
+use super::placement::{place_lights_with, PlacementDensity};
 use super::reference::RR_START_DEPTH;
 use super::rng::Rng;
 use super::sh::{sh_basis, sh_count, MAX_COUNT, MAX_ORDER};
@@ -273,6 +273,14 @@ impl LightSources {
     }
 }
 
+/// The placement density of the internal lights in `vol` with uniform
+/// fraction `u_mix` (a [`PLACEMENT_RESOLUTION`]-cell table of `ρ`): what
+/// [`InternalLights::build`] places by, and all that the placement needs
+/// of the medium.
+pub fn placement_density<D: DensityField>(vol: &Volume<D>, u_mix: f32) -> PlacementDensity {
+    PlacementDensity::build(&vol.density, vol.bounds, PLACEMENT_RESOLUTION, u_mix)
+}
+
 impl InternalLights {
     /// Places the lights, runs the walks and builds the indices. Returns
     /// `None` if `cancel` is set meanwhile.
@@ -283,15 +291,28 @@ impl InternalLights {
         cancel: &AtomicBool,
     ) -> Option<Self> {
         let start = Instant::now();
+        let density = placement_density(vol, params.uniform_mix);
+        let table = start.elapsed().as_secs_f64();
+        let mut out = Self::build_placed(vol, external, params, &density, cancel)?;
+        out.timings.placement += table;
+        Some(out)
+    }
+
+    /// [`InternalLights::build`] with the placement density already built
+    /// ([`placement_density`] of this medium and `params.uniform_mix`: it
+    /// depends on nothing else, so a renderer keeps it while the other
+    /// parameters change). `timings.placement` counts drawing the lights
+    /// only.
+    pub fn build_placed<D: DensityField>(
+        vol: &Volume<D>,
+        external: &Lights,
+        params: &InternalParams,
+        density: &PlacementDensity,
+        cancel: &AtomicBool,
+    ) -> Option<Self> {
+        let start = Instant::now();
         let m = params.lights.max(1);
-        let placement = place_lights(
-            &vol.density,
-            vol.bounds,
-            m,
-            params.uniform_mix,
-            params.seed,
-            PLACEMENT_RESOLUTION,
-        );
+        let placement = place_lights_with(density, m, params.seed);
         let lights: Vec<InternalLight> = placement
             .lights
             .par_iter()

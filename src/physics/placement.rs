@@ -365,9 +365,14 @@ pub fn place_lights<D: DensityField>(
     resolution: u32,
 ) -> Placement {
     let sampler = PlacementDensity::build(density, bounds, resolution, u_mix);
-    let lights = sample_lights(&sampler, m, seed);
+    place_lights_with(&sampler, m, seed)
+}
+
+/// [`place_lights`] with the placement density already built (it depends
+/// on the density, the box, `u_mix` and the resolution only).
+pub fn place_lights_with(sampler: &PlacementDensity, m: usize, seed: u64) -> Placement {
     Placement {
-        lights,
+        lights: sample_lights(sampler, m, seed),
         density_integral: sampler.density_integral(),
         box_volume: sampler.box_volume(),
         u_mix: sampler.u_mix(),

@@ -1,13 +1,18 @@
 //! A scene turned into what the estimators need: the camera frame, the
-//! density field with its majorant grid, and the lights as unit vectors.
+//! density field with its majorant grid, the lights as unit vectors, and
+//! (built when first needed) the internal lights' placement density.
 
 use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Instant;
 
 use glam::Vec3;
 
 use crate::physics::gated_walk::Clock;
-use crate::physics::internal::{InternalParams, L1Form};
+use crate::physics::internal::{placement_density, InternalLights, InternalParams, L1Form};
 use crate::physics::lights::{Lights, PointLight, Sun};
+use crate::physics::placement::PlacementDensity;
 use crate::physics::volume::{DensityField, Optics, Volume};
 use crate::scene::{
     CameraFrame, ClockKind, Density, L1Kind, Light, RenderSettings, Scene, SceneError,
@@ -42,6 +47,11 @@ pub struct Prepared {
     pub volume: SceneVolume,
     /// External lights.
     pub lights: Lights,
+    /// The internal lights' placement density for one `u_mix` (its bits),
+    /// built when first needed: like the majorant grid it depends on the
+    /// medium only, so re-sampling after a change of `s*`, `M`, `N`, `K`,
+    /// `g` or the seed (a renewed light set) reuses it.
+    placement: Mutex<Option<(u32, Arc<PlacementDensity>)>>,
 }
 
 impl Prepared {
@@ -67,7 +77,44 @@ impl Prepared {
             volume,
             lights,
             scene,
+            placement: Mutex::new(None),
         }
+    }
+
+    /// The placement density of the internal lights with uniform fraction
+    /// `u_mix`, built the first time it is asked for (and again when
+    /// `u_mix` changes).
+    pub fn placement_density(&self, u_mix: f32) -> Arc<PlacementDensity> {
+        let mut cached = self
+            .placement
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        if let Some((bits, density)) = &*cached {
+            if *bits == u_mix.to_bits() {
+                return density.clone();
+            }
+        }
+        let density = Arc::new(placement_density(&self.volume, u_mix));
+        *cached = Some((u_mix.to_bits(), density.clone()));
+        density
+    }
+
+    /// [`InternalLights::build`] for this scene with the cached placement
+    /// density (the same lights; `timings.placement` includes building the
+    /// density when it was not cached yet). `None` if `cancel` is set
+    /// meanwhile.
+    pub fn build_internal_lights(
+        &self,
+        params: &InternalParams,
+        cancel: &AtomicBool,
+    ) -> Option<InternalLights> {
+        let start = Instant::now();
+        let density = self.placement_density(params.uniform_mix);
+        let table = start.elapsed().as_secs_f64();
+        let mut lights =
+            InternalLights::build_placed(&self.volume, &self.lights, params, &density, cancel)?;
+        lights.timings.placement += table;
+        Some(lights)
     }
 }
 

@@ -806,12 +806,7 @@ impl JobContext<'_> {
                     // A fresh light set (built on the CPU, as the first).
                     set = light_set(&internal_settings, pass);
                     let params = internal_params_for_set(prepared, &internal_settings, set);
-                    let Some(lights) = InternalLights::build(
-                        &prepared.volume,
-                        &prepared.lights,
-                        &params,
-                        self.cancel,
-                    ) else {
+                    let Some(lights) = prepared.build_internal_lights(&params, self.cancel) else {
                         return Ok(self.next_command());
                     };
                     engine
