@@ -21,7 +21,9 @@ use crate::physics::internal::BuildTimings;
 use crate::render::export::write_image;
 use crate::render::film::image_mean;
 use crate::render::tonemap::ViewTransform;
-use crate::render::{internal_params, internal_params_for_set, light_set, Film, Prepared};
+use crate::render::{
+    internal_params, internal_params_for_set, light_set, light_set_starting, Film, Prepared,
+};
 use crate::scene::{ClockKind, InternalSettings, L1Kind, Method, RenderSettings, Scene};
 
 /// Lantern: multiple scattering as internal lights, live.
@@ -554,13 +556,15 @@ fn render_gpu(
     let build_secs = t_build.elapsed().as_secs_f64();
     let bar = pass_bar(settings.spp);
     let start = Instant::now();
-    let mut set = 0;
+    let mut sets = 0;
     let mut resample_secs = 0.0;
     for pass in 0..settings.spp {
-        if settings.method == Method::Internal && light_set(settings, pass) != set {
+        let renew =
+            light_set_starting(settings, pass).filter(|_| settings.method == Method::Internal);
+        if let Some(set) = renew {
             // A fresh light set, walked on the GPU like the first.
             let t = Instant::now();
-            set = light_set(settings, pass);
+            sets = set;
             let params = internal_params_for_set(prepared, settings, set);
             let lights = build_internal_lights_gpu(&ctx, prepared, &params)?;
             renderer.set_internal_lights(&lights, settings.internal.light_samples)?;
@@ -573,10 +577,10 @@ fn render_gpu(
         bar.inc(1);
     }
     bar.finish_and_clear();
-    if set > 0 {
+    if sets > 0 {
         println!(
-            "{} more light sets (one every {} passes) walked in {resample_secs:.2} s, included below",
-            set, settings.internal.resample_every
+            "{sets} more light sets (one every {} passes) walked in {resample_secs:.2} s, included below",
+            settings.internal.resample_every
         );
     }
     let secs = start.elapsed().as_secs_f64();

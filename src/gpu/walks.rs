@@ -9,8 +9,9 @@
 //! - Placement: the placement grid (`ρ` at the cell corners) and an alias
 //!   table over its cells depend on the medium only and are built on the
 //!   CPU (`PlacementDensity`, kept with the prepared scene) and uploaded;
-//!   the sampling runs on the GPU, one invocation per light (`shaders/placement/main.wgsl`), deterministic
-//!   for a seed. Procedural and voxel media alike.
+//!   the sampling runs on the GPU, one invocation per light
+//!   (`shaders/placement/main.wgsl`), deterministic for a seed. Procedural
+//!   and voxel media alike.
 //! - Walks: one workgroup of [`WALK_LANES`] invocations per light, one walk
 //!   per invocation and dispatch; `⌈K/64⌉` dispatches add their sums to
 //!   one output buffer (`shaders/walks/main.wgsl`). Splitting `K` over

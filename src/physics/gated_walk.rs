@@ -50,13 +50,13 @@
 //! The optical depth along a straight flight is integrated by the midpoint
 //! rule on a lattice anchored at the start of each flight and of each
 //! majorant cell, of step `cell` (the smallest extent of a majorant cell)
-//! in cells whose majorant optical depth across `cell` is at most 0.5 and
-//! `cell / 2` in denser ones: exact for densities that are constant in
-//! each majorant cell, second-order accurate otherwise, and its error in a
-//! cell a small part of an optical depth that is small already wherever it
-//! takes one step (one step where a cell holds well under a mean free
-//! path halved the clock's density lookups on the puffs, where they were
-//! four fifths of all lookups of the walks). The clock is that quadrature;
+//! in cells whose majorant optical depth across `cell` is at most a quarter
+//! of the window `s*`, and `cell / 2` in denser ones: exact for densities
+//! that are constant in each majorant cell, second-order accurate
+//! otherwise, and a step never spans more than a quarter window or half a
+//! cell (one step where cells are thin halved the clock's density lookups
+//! on the puffs, where they were four fifths of all lookups of the walks).
+//! The clock is that quadrature;
 //! the collisions themselves come from spectral tracking against the true
 //! `c`, so the walk stays unbiased for `L` whatever the quadrature error.
 //! A walk marches its clock only when the next gate may be near: the
@@ -285,6 +285,7 @@ pub fn march_clock<D: DensityField>(
             return false;
         }
         if m <= 0.0 {
+            // The majorant bounds ρ: nothing to count in this cell.
             return b < t_stop;
         }
         let h = clock_step(cell, m, s_star);
@@ -808,6 +809,20 @@ mod tests {
         )
     }
 
+    /// [`volume`] in the box `[−half, half]³` with `cells` majorant cells
+    /// per axis, each bounded by `base + amp`.
+    fn boxed(base: f32, amp: f32, albedo: f32, half: f32, cells: u32) -> Volume<Field> {
+        let mut vol = volume(base, amp, albedo);
+        vol.bounds = (Vec3::splat(-half), Vec3::splat(half));
+        vol.majorants = crate::physics::majorant::MajorantGrid::build(
+            vol.bounds.0,
+            vol.bounds.1,
+            cells,
+            |_, _| base + amp,
+        );
+        vol
+    }
+
     /// Collisions per window of the clock for `walks` walks: a histogram of
     /// counts in windows `1..=N` (the windows between consecutive gates).
     fn window_counts(vol: &Volume<Field>, settings: &GateSettings, walks: u32) -> Vec<u64> {
@@ -869,59 +884,43 @@ mod tests {
 
     #[test]
     fn collisions_per_window_are_poisson() {
-        // Homogeneous, geometric clock: Poisson(σ_t s*) per window.
-        let vol = volume(1.0, 0.0, 1.0);
-        let settings = GateSettings {
-            s_star: 1.7,
-            n_terms: 6,
-            clock: Clock::Geometric,
-            rr_start: u32::MAX,
+        // Collisions in each of the windows of 20 000 walks against
+        // Poisson(s*); the 99.9th percentile of χ² for ≤ 10 degrees of
+        // freedom is ≤ 29.6.
+        let check = |vol: &Volume<Field>, clock, s_star: f32, n_terms, label: &str| {
+            let settings = GateSettings {
+                s_star,
+                n_terms,
+                clock,
+                rr_start: u32::MAX,
+            };
+            let hist = window_counts(vol, &settings, 20_000);
+            let (chi2, dof) = chi2_poisson(&hist, s_star as f64);
+            eprintln!("{label}: χ² = {chi2:.1} with {dof} dof");
+            assert!(dof >= 4 && chi2 < 29.6, "{label}: χ² = {chi2}, dof = {dof}");
         };
-        let hist = window_counts(&vol, &settings, 20_000);
-        let (chi2, dof) = chi2_poisson(&hist, 1.7);
-        eprintln!("geometric: χ² = {chi2:.1} with {dof} dof");
-        // 99.9th percentile of χ² for ≤ 10 degrees of freedom is ≤ 29.6.
-        assert!(dof >= 4 && chi2 < 29.6, "χ² = {chi2}, dof = {dof}");
+        // Homogeneous, geometric clock: Poisson(σ_t s*) per window.
+        check(
+            &volume(1.0, 0.0, 1.0),
+            Clock::Geometric,
+            1.7,
+            6,
+            "geometric",
+        );
 
         // Heterogeneous, optical-depth clock: Poisson(τ*) per window
         // whatever the density (METHOD.md §7), on both lattices: a dense
         // field (majorant optical depth 0.84 across a cell, over a quarter
         // of τ* = 1.3: two steps per cell) and a thin one (0.26: one step).
         for (base, amp, steps) in [(1.0f32, 0.8f32, 2.0f32), (0.3, 0.25, 1.0)] {
-            let mut vol = Volume::new(
-                Field { base, amp },
-                Optics {
-                    sigma_t: Vec3::splat(1.0),
-                    albedo: Vec3::ONE,
-                    g: 0.3,
-                },
-                8,
-            );
             // Majorant cells of 120/256 ≈ 0.47 resolve sin(x) sin(y), over
             // a box that 5 windows of τ* = 1.3 never leave (a walk of ~7
             // collisions moves a few units where ρ ≈ 1, ~25 where ρ ≈ 0.3).
-            vol.bounds = (Vec3::splat(-60.0), Vec3::splat(60.0));
-            vol.majorants = crate::physics::majorant::MajorantGrid::build(
-                vol.bounds.0,
-                vol.bounds.1,
-                256,
-                |_, _| base + amp,
-            );
+            let vol = boxed(base, amp, 1.0, 60.0, 256);
             let cell = clock_cell(&vol);
             assert_eq!(clock_step(cell, base + amp, 1.3), cell / steps);
-            let settings = GateSettings {
-                s_star: 1.3,
-                n_terms: 5,
-                clock: Clock::OpticalDepth,
-                rr_start: u32::MAX,
-            };
-            let hist = window_counts(&vol, &settings, 20_000);
-            let (chi2, dof) = chi2_poisson(&hist, 1.3);
-            eprintln!("optical depth, ρ̄ = {base}: χ² = {chi2:.1} with {dof} dof");
-            assert!(
-                dof >= 4 && chi2 < 29.6,
-                "ρ̄ = {base}: χ² = {chi2}, dof = {dof}"
-            );
+            let label = format!("optical depth, ρ̄ = {base}");
+            check(&vol, Clock::OpticalDepth, 1.3, 5, &label);
         }
     }
 
@@ -935,25 +934,7 @@ mod tests {
         // Unbounded (walks reach every gate) and a small box (walks leave
         // it, through the bound's exit check).
         for half in [60.0f32, 2.0] {
-            let mut vol = Volume::new(
-                Field {
-                    base: 1.0,
-                    amp: 0.8,
-                },
-                Optics {
-                    sigma_t: Vec3::splat(1.0),
-                    albedo: Vec3::splat(0.9),
-                    g: 0.3,
-                },
-                8,
-            );
-            vol.bounds = (Vec3::splat(-half), Vec3::splat(half));
-            vol.majorants = crate::physics::majorant::MajorantGrid::build(
-                vol.bounds.0,
-                vol.bounds.1,
-                (half * 4.0) as u32,
-                |_, _| 1.8,
-            );
+            let vol = boxed(1.0, 0.8, 0.9, half, (half * 4.0) as u32);
             let settings = GateSettings {
                 s_star: 2.5,
                 n_terms: 8,

@@ -39,6 +39,7 @@
 //! carried by term `k` over the whole medium. It shows how fast the series
 //! converges: the terms beyond `N` are what truncation drops.
 
+use std::borrow::Borrow;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
@@ -290,29 +291,30 @@ impl InternalLights {
         params: &InternalParams,
         cancel: &AtomicBool,
     ) -> Option<Self> {
-        let start = Instant::now();
-        let density = placement_density(vol, params.uniform_mix);
-        let table = start.elapsed().as_secs_f64();
-        let mut out = Self::build_placed(vol, external, params, &density, cancel)?;
-        out.timings.placement += table;
-        Some(out)
+        Self::build_placed(
+            vol,
+            external,
+            params,
+            || placement_density(vol, params.uniform_mix),
+            cancel,
+        )
     }
 
-    /// [`InternalLights::build`] with the placement density already built
+    /// [`InternalLights::build`] placing by the density `density` gives
     /// ([`placement_density`] of this medium and `params.uniform_mix`: it
-    /// depends on nothing else, so a renderer keeps it while the other
-    /// parameters change). `timings.placement` counts drawing the lights
-    /// only.
-    pub fn build_placed<D: DensityField>(
+    /// depends on nothing else, so a renderer may keep it while the other
+    /// parameters change and hand it back here). `timings.placement`
+    /// counts getting it.
+    pub fn build_placed<D: DensityField, P: Borrow<PlacementDensity>>(
         vol: &Volume<D>,
         external: &Lights,
         params: &InternalParams,
-        density: &PlacementDensity,
+        density: impl FnOnce() -> P,
         cancel: &AtomicBool,
     ) -> Option<Self> {
         let start = Instant::now();
         let m = params.lights.max(1);
-        let placement = place_lights_with(density, m, params.seed);
+        let placement = place_lights_with(density().borrow(), m, params.seed);
         let lights: Vec<InternalLight> = placement
             .lights
             .par_iter()

@@ -5,7 +5,6 @@
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, PoisonError};
-use std::time::Instant;
 
 use glam::Vec3;
 
@@ -108,13 +107,13 @@ impl Prepared {
         params: &InternalParams,
         cancel: &AtomicBool,
     ) -> Option<InternalLights> {
-        let start = Instant::now();
-        let density = self.placement_density(params.uniform_mix);
-        let table = start.elapsed().as_secs_f64();
-        let mut lights =
-            InternalLights::build_placed(&self.volume, &self.lights, params, &density, cancel)?;
-        lights.timings.placement += table;
-        Some(lights)
+        InternalLights::build_placed(
+            &self.volume,
+            &self.lights,
+            params,
+            || self.placement_density(params.uniform_mix),
+            cancel,
+        )
     }
 }
 
@@ -160,6 +159,13 @@ pub fn light_set(settings: &RenderSettings, pass: u32) -> u32 {
         0 => 0,
         every => pass / every,
     }
+}
+
+/// The later light set that begins at pass `pass`, if one does: where a
+/// progressive loop over passes `0, 1, …` renews its lights.
+pub fn light_set_starting(settings: &RenderSettings, pass: u32) -> Option<u32> {
+    let every = settings.internal.resample_every;
+    (every > 0 && pass > 0 && pass.is_multiple_of(every)).then_some(pass / every)
 }
 
 /// [`internal_params`] for light set `set`: the same parameters, with the

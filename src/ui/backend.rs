@@ -40,7 +40,7 @@ use crate::gpu::display::{read_accum, DisplayPass, ImageStats};
 use crate::gpu::{GpuContext, GpuError, GpuRenderer};
 use crate::physics::gated_walk::Clock;
 use crate::physics::internal::InternalLights;
-use crate::render::{internal_params_for_set, light_set, Film, Prepared};
+use crate::render::{internal_params_for_set, light_set_starting, Film, Prepared};
 use crate::scene::{Density, DensitySource, Method, Scene};
 
 pub use crate::scene::{ClockKind, InternalSettings};
@@ -795,16 +795,15 @@ impl JobContext<'_> {
             return Ok(Some(c));
         }
         let internal_settings = settings_for(job, Estimator::Internal);
-        let mut set = 0;
         for pass in 0..job.max_spp {
             if self.cancel.load(Ordering::Relaxed) {
                 return Ok(self.next_command());
             }
             let start = Instant::now();
             for (e, engine) in engines.iter_mut() {
-                if *e == Estimator::Internal && light_set(&internal_settings, pass) != set {
+                let renew = light_set_starting(&internal_settings, pass);
+                if let (Estimator::Internal, Some(set)) = (*e, renew) {
                     // A fresh light set (built on the CPU, as the first).
-                    set = light_set(&internal_settings, pass);
                     let params = internal_params_for_set(prepared, &internal_settings, set);
                     let Some(lights) = prepared.build_internal_lights(&params, self.cancel) else {
                         return Ok(self.next_command());
