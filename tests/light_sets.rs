@@ -117,3 +117,21 @@ fn placement_density_is_kept_with_the_scene() {
     assert!(Arc::ptr_eq(&a, &prepared.placement_density(0.0)));
     assert!(!Arc::ptr_eq(&a, &prepared.placement_density(0.25)));
 }
+
+/// Where a progressive loop renews its lights: never with `resample_every`
+/// 0, at passes 4, 8, … (sets 1, 2, …) with 4.
+#[test]
+fn renewals_start_every_p_passes() {
+    let mut settings = noisy_lights().scene.render.clone();
+    let starts = |settings: &lantern::scene::RenderSettings| {
+        (0..13)
+            .filter_map(|pass| {
+                lantern::render::light_set_starting(settings, pass).map(|s| (pass, s))
+            })
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(starts(&settings), vec![]);
+    settings.internal.resample_every = 4;
+    assert_eq!(starts(&settings), vec![(4, 1), (8, 2), (12, 3)]);
+    assert_eq!(lantern::render::light_set(&settings, 11), 2);
+}

@@ -165,7 +165,7 @@ pub fn light_set(settings: &RenderSettings, pass: u32) -> u32 {
 /// progressive loop over passes `0, 1, …` renews its lights.
 pub fn light_set_starting(settings: &RenderSettings, pass: u32) -> Option<u32> {
     let every = settings.internal.resample_every;
-    (every > 0 && pass > 0 && pass.is_multiple_of(every)).then_some(pass / every)
+    (every > 0 && pass > 0 && pass.is_multiple_of(every)).then(|| pass / every)
 }
 
 /// [`internal_params`] for light set `set`: the same parameters, with the
