@@ -41,7 +41,7 @@ use lantern::gpu::shaders::{ModuleSource, MODULES};
 use lantern::gpu::GpuRenderer;
 use lantern::physics::internal::InternalLights;
 use lantern::render::{internal_params, Film, Prepared};
-use lantern::scene::{ClockKind, L1Kind, Method};
+use lantern::scene::{ClockKind, InternalSettings, L1Kind, Method};
 
 /// Parses and validates one assembled module, naming the file and line of
 /// the first error.
@@ -302,17 +302,28 @@ const CPU_SPP_PER_GPU_SPP: u32 = 8;
 /// `spp` samples per pixel on the GPU and [`CPU_SPP_PER_GPU_SPP`] times as
 /// many on the CPU, and compares.
 fn agree_gather(scene: &str, clock: ClockKind, l1: L1Kind, side: u32, spp: u32) {
+    agree_gather_with(scene, side, spp, |s| {
+        s.clock = clock;
+        s.l1 = l1;
+    });
+}
+
+/// [`agree_gather`] with the scene's internal-lights settings changed by
+/// `edit`.
+fn agree_gather_with(scene: &str, side: u32, spp: u32, edit: impl FnOnce(&mut InternalSettings)) {
     let Some(ctx) = common::gpu() else { return };
     let prepared = prepare_small(scene, side);
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
-    settings.internal.clock = clock;
-    settings.internal.l1 = l1;
+    edit(&mut settings.internal);
     let t = Instant::now();
     let cache = common::build_lights(&prepared, &settings);
     let build_secs = t.elapsed().as_secs_f64();
     let t = Instant::now();
     settings.seed = 1;
+    // Both backends gather with this one set (it keeps whether the render
+    // renews its sets in `cache.params.renewed`).
+    settings.internal.resample_every = 0;
     let cpu = common::gather_cpu(&prepared, &settings, &cache, spp * CPU_SPP_PER_GPU_SPP);
     let cpu_secs = t.elapsed().as_secs_f64();
     let t = Instant::now();
@@ -380,6 +391,42 @@ fn gather_agrees_chromatic_sphere() {
         L1Kind::Field,
         24,
         256,
+    );
+}
+
+/// Light sets renewed (`resample_every > 0`): the GPU leaves the
+/// reconstruction unclamped as the CPU does. With 4 walks per light the
+/// reconstruction is negative in places, so a GPU that still clamped would
+/// be brighter: the unclamped CPU image is checked to differ from the
+/// clamped one by far more than the agreement's tolerance.
+#[test]
+fn gather_agrees_puffs_renewed_sets_unclamped() {
+    let edit = |s: &mut InternalSettings| {
+        s.walks = 4;
+        s.lights = 1024;
+        s.resample_every = 4;
+    };
+    agree_gather_with("assets/scenes/puffs_grid.ron", 24, 256, edit);
+    if common::gpu().is_none() {
+        return;
+    }
+    let prepared = prepare_small("assets/scenes/puffs_grid.ron", 24);
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    edit(&mut settings.internal);
+    let unclamped = common::build_lights(&prepared, &settings);
+    settings.internal.resample_every = 0;
+    let clamped = common::build_lights(&prepared, &settings);
+    assert!(unclamped.params.renewed && !clamped.params.renewed);
+    let mean = |cache| {
+        let img = common::gather_cpu(&prepared, &settings, cache, 64).mean();
+        img.iter().map(|v| v.x + v.y + v.z).sum::<f32>() / img.len() as f32
+    };
+    let (u, c) = (mean(&unclamped), mean(&clamped));
+    eprintln!("puffs, K = 4: image mean {u} unclamped, {c} clamped");
+    assert!(
+        c > u * 1.02,
+        "the clamp should brighten the image: {c} vs {u}"
     );
 }
 

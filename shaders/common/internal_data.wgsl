@@ -47,7 +47,8 @@ struct GatherParams {
     l1_form: u32,
     scattered_offset: u32,
     n_terms: u32,
-    _pad: vec2<u32>,
+    unclamped: u32,
+    _pad: u32,
 }
 
 // The clock tags `CLOCK_*` are in gated_walk.wgsl.

@@ -112,7 +112,8 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
         },
         scattered_offset,
         n_terms: cache.params.terms,
-        _pad: [0; 2],
+        unclamped: u32::from(cache.params.renewed),
+        _pad: 0,
     };
     PackedLights {
         params,

@@ -238,8 +238,11 @@ pub struct GpuGatherParams {
     /// Series truncation `N` (the marched single scatter beyond the
     /// window reaches a clock of `(N+1) s*`).
     pub n_terms: u32,
+    /// 1: the kernel reconstruction is left unclamped (light sets are
+    /// renewed, `InternalParams::renewed`); 0: clamped at zero.
+    pub unclamped: u32,
     /// Padding to a multiple of 16 bytes.
-    pub _pad: [u32; 2],
+    pub _pad: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 192);
 

@@ -435,6 +435,7 @@ mod tests {
             clock,
             l1,
             seed: 0,
+            renewed: false,
         }
     }
 
@@ -741,5 +742,87 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// With renewed light sets the passes average the reconstruction over
+    /// sets, so it must be linear in the lights' coefficients: the average
+    /// of two sets whose walk noise is `+D` and `−D` is the reconstruction
+    /// of the noiseless sources, negative lobes included. A single set's
+    /// reconstruction is clamped at zero, which biases that average
+    /// upwards where `J` is small.
+    #[test]
+    fn renewed_sets_reconstruct_without_clamping() {
+        let vol = cube(2.0, 0.9, 0.0);
+        let mut lights = Vec::new();
+        for i in 0..27 {
+            let c = Vec3::new((i % 3) as f32, ((i / 3) % 3) as f32, (i / 9) as f32) - 1.0;
+            lights.push(InternalLight {
+                position: c * 0.1,
+                density: 1.0,
+                weight: 1e-3,
+            });
+        }
+        let count = sh_count(1);
+        // J(n) = a + b (linear in n): negative over part of the sphere.
+        let sources = |a: f32, b: f32| {
+            let mut coeffs = vec![Vec3::ZERO; count * lights.len()];
+            for c in coeffs.chunks_mut(count) {
+                c[0] = Vec3::splat(a);
+                c[1] = Vec3::new(b, 0.5 * b, 0.25 * b);
+            }
+            coeffs
+        };
+        let build = |renewed: bool, a: f32, b: f32| {
+            let params = InternalParams {
+                lights: lights.len(),
+                renewed,
+                ..sh1_params(Clock::OpticalDepth, 0.5, 1, 0.5, L1Form::Field)
+            };
+            InternalLights::assemble(
+                &vol,
+                &Lights::default(),
+                &params,
+                LightSources {
+                    lights: lights.clone(),
+                    f_coeffs: vec![Vec3::ZERO; count * lights.len()],
+                    multi_coeffs: sources(a, b),
+                    scattered_coeffs: sources(a, b),
+                    arrival: Vec::new(),
+                    term_energy: vec![Vec3::ZERO; 2],
+                },
+                8.0,
+            )
+        };
+        let dirs = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z];
+        let (a, b, da, db) = (1.0, 3.0, 0.5, 2.0);
+        let mut negative = 0;
+        for part in [Part::All, Part::Scattered] {
+            for n in dirs {
+                let at = |c: &InternalLights| c.reconstruct_multi(Vec3::ZERO, n, 1.0, part);
+                let truth = at(&build(true, a, b));
+                let plus = at(&build(true, a + da, b + db));
+                let minus = at(&build(true, a - da, b - db));
+                let avg = 0.5 * (plus + minus);
+                assert!(
+                    (avg - truth).abs().max_element() <= 1e-5 * truth.abs().max_element(),
+                    "{n}: renewed sets average to {avg}, the noiseless sources give {truth}"
+                );
+                if truth.min_element() < 0.0 {
+                    negative += 1;
+                }
+                let clamped = |a, b| at(&build(false, a, b));
+                let (cp, cm) = (clamped(a + da, b + db), clamped(a - da, b - db));
+                assert_eq!(clamped(a, b), truth.max(Vec3::ZERO));
+                assert!(cp.min_element() >= 0.0 && cm.min_element() >= 0.0);
+                // Where a set's value has either sign, the clamped average
+                // is above the noiseless value.
+                for c in 0..3 {
+                    if plus[c].min(minus[c]) < 0.0 && plus[c].max(minus[c]) > 0.0 {
+                        assert!(0.5 * (cp[c] + cm[c]) > truth[c].max(0.0), "{n} channel {c}");
+                    }
+                }
+            }
+        }
+        assert!(negative >= 2, "the test needs negative lobes");
     }
 }
