@@ -59,6 +59,13 @@ pub struct ConvergeArgs {
     /// Output folder.
     #[arg(long, default_value = "target/converge")]
     pub out: PathBuf,
+    /// After the curves, measure what the internal-lights image converges
+    /// to: two independent renders of this many passes each (other seeds,
+    /// so other light sets), whose difference gives their noise, and the
+    /// error of their average less that noise the method's bias against
+    /// the converged reference (0: not measured).
+    #[arg(long, default_value_t = 0)]
+    pub floor_passes: u32,
     /// Internal-lights parameters (default: the scene's).
     #[command(flatten)]
     pub internal: InternalArgs,
@@ -92,6 +99,60 @@ pub fn rmse_against(image: &[Vec3], converged: &[Vec3], converged_var: &[Vec3]) 
     }
     let mean = (sum / n).max(1e-30);
     (((se - var) / n).max(0.0).sqrt() / mean) as f32
+}
+
+/// What a pair of independent renders `a1`, `a2` (same settings, other
+/// seeds) says about their expectation against `converged`: the bias,
+/// `√(mean (ā − c)² − mean Var[c] − mean (a1 − a2)²/4)` (the squared error
+/// of their average `ā` less the converged image's noise and less theirs,
+/// which `(a1 − a2)²/4` estimates without bias), and the noise of `ā`,
+/// `√(mean (a1 − a2)²/4)`; both relative to the converged image's mean.
+/// The bias is clamped at 0 (an estimate of a square may fall below 0).
+pub fn split_bias(
+    a1: &[Vec3],
+    a2: &[Vec3],
+    converged: &[Vec3],
+    converged_var: &[Vec3],
+) -> (f32, f32) {
+    let n = a1.len().max(1) as f64 * 3.0;
+    let (mut se, mut half, mut var, mut sum) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for (((x, y), c), v) in a1.iter().zip(a2).zip(converged).zip(converged_var) {
+        for k in 0..3 {
+            let (x, y, c) = (x[k] as f64, y[k] as f64, c[k] as f64);
+            se += (0.5 * (x + y) - c).powi(2);
+            half += 0.25 * (x - y).powi(2);
+            var += v[k] as f64;
+            sum += c;
+        }
+    }
+    let mean = (sum / n).max(1e-30);
+    let bias = ((se - var - half) / n).max(0.0).sqrt() / mean;
+    let noise = (half / n).sqrt() / mean;
+    (bias as f32, noise as f32)
+}
+
+/// Renders `settings` for `passes` passes with seed `seed` and returns the
+/// mean image.
+fn render_mean(
+    prepared: &Arc<Prepared>,
+    settings: &RenderSettings,
+    seed: u64,
+    passes: u32,
+) -> Result<Vec<Vec3>> {
+    let never = AtomicBool::new(false);
+    let mut settings = settings.clone();
+    settings.seed = seed;
+    let renderer =
+        Renderer::new(prepared.clone(), &settings, &never).context("render was cancelled")?;
+    let cam = prepared.camera;
+    let mut film = Film::new(cam.width, cam.height);
+    for pass in 0..passes {
+        let img = renderer
+            .pass(pass, &never)
+            .context("render was cancelled")?;
+        film.add_pass(&img.total);
+    }
+    Ok(film.mean())
 }
 
 /// The first time a curve is at or below `target`, linearly interpolated
@@ -368,6 +429,25 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
             "\nthe reference did not reach the target within the budget; raise --budget"
         ),
     };
+    if args.floor_passes > 0 {
+        let p = args.floor_passes;
+        eprintln!("{stem}: the internal lights' floor, 2 × {p} passes…");
+        let start = Instant::now();
+        let a1 = render_mean(&prepared, &internal, internal.seed.wrapping_add(101), p)?;
+        let a2 = render_mean(&prepared, &internal, internal.seed.wrapping_add(202), p)?;
+        let secs = start.elapsed().as_secs_f64();
+        let (bias, noise) = split_bias(&a1, &a2, &converged, &converged_var);
+        let m = |img: &[Vec3]| img.iter().map(|v| (v.x + v.y + v.z) as f64).sum::<f64>();
+        let _ = writeln!(
+            report,
+            "\nwhat the internal lights converge to (two renders of {p} passes, {secs:.1} s): \
+             bias {:.2} % RMSE against the converged reference, its noise removed \
+             (the average's own noise {:.2} %); image mean {:+.2} %",
+            100.0 * bias,
+            100.0 * noise,
+            100.0 * ((m(&a1) + m(&a2)) / (2.0 * m(&converged)).max(1e-30) - 1.0)
+        );
+    }
     print!("{report}");
     std::fs::write(out_dir.join("report.md"), &report)
         .with_context(|| format!("cannot write {}", out_dir.join("report.md").display()))?;
@@ -411,6 +491,7 @@ mod tests {
             budget: 0.5,
             target: 0.05,
             out: dir.path().to_owned(),
+            floor_passes: 8,
             internal: InternalArgs {
                 lights: Some(256),
                 walks: Some(8),
@@ -435,6 +516,11 @@ mod tests {
         let (first, last) = (reference[0], reference[reference.len() - 1]);
         assert!(last.0 > 64, "{csv}");
         assert!(last.1 < 0.5 * first.1, "{csv}");
+        let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+        assert!(
+            report.contains("what the internal lights converge to"),
+            "{report}"
+        );
         for f in [
             "report.md",
             "rmse_vs_time.png",
@@ -443,6 +529,33 @@ mod tests {
         ] {
             assert!(out.join(f).is_file(), "{f} missing");
         }
+    }
+
+    /// Two renders with a known bias (+0.1 on a converged image of 1) and
+    /// Gaussian noise (σ 0.2 each, so 0.2/√2 in their average): the split
+    /// recovers both; with no bias it finds (almost) none.
+    #[test]
+    fn split_bias_separates_bias_from_noise() {
+        let n = 40_000;
+        let mut rng = crate::physics::rng::Rng::for_sample(5, 0, 0);
+        let mut gauss = || {
+            let (u, v) = (rng.next_f32().max(1e-12), rng.next_f32());
+            (-2.0 * u.ln()).sqrt() * (std::f32::consts::TAU * v).cos()
+        };
+        let converged = vec![Vec3::ONE; n];
+        let var = vec![Vec3::splat(1e-4); n];
+        let mut noisy = |bias: f32| -> Vec<Vec3> {
+            (0..n)
+                .map(|_| Vec3::new(gauss(), gauss(), gauss()) * 0.2 + Vec3::splat(1.0 + bias))
+                .collect()
+        };
+        let (a1, a2) = (noisy(0.1), noisy(0.1));
+        let (bias, noise) = split_bias(&a1, &a2, &converged, &var);
+        assert!((bias - 0.1).abs() < 0.005, "bias {bias}");
+        assert!((noise - 0.2 / 2f32.sqrt()).abs() < 0.003, "noise {noise}");
+        let (b1, b2) = (noisy(0.0), noisy(0.0));
+        let (bias, _) = split_bias(&b1, &b2, &converged, &var);
+        assert!(bias < 0.02, "bias {bias}");
     }
 
     #[test]
