@@ -238,6 +238,7 @@ fn mirrors_match_wgsl_layout() {
             l1_form,
             scattered_offset,
             n_terms,
+            unclamped,
             _pad
         ]
     );
