@@ -365,9 +365,12 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
     let mut report = String::new();
     let _ = writeln!(
         report,
-        "\n### {stem} {w}×{h}: time to {:.1} % RMSE (converged reference {} spp, its own noise {:.2} % removed; budget {:.0} s each)\n",
+        "\n### {stem} {w}×{h}: time to {:.1} % RMSE (converged reference {}, its own noise {:.2} % removed; budget {:.0} s each)\n",
         100.0 * args.target,
-        args.reference_spp,
+        match &args.converged {
+            Some(path) => format!("read from {}", path.display()),
+            None => format!("{} spp", args.reference_spp),
+        },
         100.0 * noise,
         args.budget
     );
