@@ -32,7 +32,7 @@ use crate::render::export::{read_exr, write_exr};
 use crate::render::plot::{Plot, Series};
 use crate::render::{Film, Prepared};
 use crate::scene::{Method, RenderSettings};
-use crate::validate::{load_square, output_dir};
+use crate::validate::{load_square, output_dir, render_timed};
 
 /// Options of `lantern converge`.
 #[derive(Clone, Debug, clap::Args)]
@@ -129,30 +129,6 @@ pub fn split_bias(
     let bias = ((se - var - half) / n).max(0.0).sqrt() / mean;
     let noise = (half / n).sqrt() / mean;
     (bias as f32, noise as f32)
-}
-
-/// Renders `settings` for `passes` passes with seed `seed` and returns the
-/// mean image.
-fn render_mean(
-    prepared: &Arc<Prepared>,
-    settings: &RenderSettings,
-    seed: u64,
-    passes: u32,
-) -> Result<Vec<Vec3>> {
-    let never = AtomicBool::new(false);
-    let mut settings = settings.clone();
-    settings.seed = seed;
-    let renderer =
-        Renderer::new(prepared.clone(), &settings, &never).context("render was cancelled")?;
-    let cam = prepared.camera;
-    let mut film = Film::new(cam.width, cam.height);
-    for pass in 0..passes {
-        let img = renderer
-            .pass(pass, &never)
-            .context("render was cancelled")?;
-        film.add_pass(&img.total);
-    }
-    Ok(film.mean())
 }
 
 /// The first time a curve is at or below `target`, linearly interpolated
@@ -436,8 +412,12 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
         let p = args.floor_passes;
         eprintln!("{stem}: the internal lights' floor, 2 × {p} passes…");
         let start = Instant::now();
-        let a1 = render_mean(&prepared, &internal, internal.seed.wrapping_add(101), p)?;
-        let a2 = render_mean(&prepared, &internal, internal.seed.wrapping_add(202), p)?;
+        let render = |offset: u64| {
+            let mut settings = internal.clone();
+            settings.seed = internal.seed.wrapping_add(offset);
+            render_timed(&prepared, &settings, p).map(|(image, _, _)| image)
+        };
+        let (a1, a2) = (render(101)?, render(202)?);
         let secs = start.elapsed().as_secs_f64();
         let (bias, noise) = split_bias(&a1, &a2, &converged, &converged_var);
         let m = |img: &[Vec3]| img.iter().map(|v| (v.x + v.y + v.z) as f64).sum::<f64>();

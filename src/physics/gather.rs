@@ -458,6 +458,32 @@ mod tests {
         }
     }
 
+    /// A cache of hand-made lights with the given multiply scattered
+    /// coefficients (all of them, and the collided part), no `F`, no
+    /// external lights, `∫ρ = 8` (the cube's).
+    fn assemble(
+        vol: &Volume<Cube>,
+        params: &InternalParams,
+        lights: &[InternalLight],
+        multi_coeffs: Vec<Vec3>,
+        scattered_coeffs: Vec<Vec3>,
+    ) -> InternalLights {
+        InternalLights::assemble(
+            vol,
+            &Lights::default(),
+            params,
+            LightSources {
+                lights: lights.to_vec(),
+                f_coeffs: vec![Vec3::ZERO; multi_coeffs.len()],
+                multi_coeffs,
+                scattered_coeffs,
+                arrival: Vec::new(),
+                term_energy: vec![Vec3::ZERO; 2],
+            },
+            8.0,
+        )
+    }
+
     /// The homogeneous cube with grey `σ_t`, albedo and `g`.
     fn cube(sigma: f32, albedo: f32, g: f32) -> Volume<Cube> {
         Volume::new(
@@ -610,20 +636,7 @@ mod tests {
             for c in multi.chunks_mut(count) {
                 c[0] = j0 * (2.0 * std::f32::consts::PI.sqrt());
             }
-            let cache = InternalLights::assemble(
-                &vol,
-                &Lights::default(),
-                &params,
-                LightSources {
-                    lights: lights.clone(),
-                    f_coeffs: vec![Vec3::ZERO; count * lights.len()],
-                    multi_coeffs: multi.clone(),
-                    scattered_coeffs: multi,
-                    arrival: Vec::new(),
-                    term_energy: vec![Vec3::ZERO; 2],
-                },
-                8.0,
-            );
+            let cache = assemble(&vol, &params, &lights, multi.clone(), multi);
             let n = 200_000u32;
             let (mut s0, mut s1, mut q1) =
                 (glam::DVec3::ZERO, glam::DVec3::ZERO, glam::DVec3::ZERO);
@@ -778,20 +791,7 @@ mod tests {
                 renewed,
                 ..sh1_params(Clock::OpticalDepth, 0.5, 1, 0.5, L1Form::Field)
             };
-            InternalLights::assemble(
-                &vol,
-                &Lights::default(),
-                &params,
-                LightSources {
-                    lights: lights.clone(),
-                    f_coeffs: vec![Vec3::ZERO; count * lights.len()],
-                    multi_coeffs: sources(a, b),
-                    scattered_coeffs: sources(a, b),
-                    arrival: Vec::new(),
-                    term_energy: vec![Vec3::ZERO; 2],
-                },
-                8.0,
-            )
+            assemble(&vol, &params, &lights, sources(a, b), sources(a, b))
         };
         let dirs = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z];
         let (a, b, da, db) = (1.0, 3.0, 0.5, 2.0);
