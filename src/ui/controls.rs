@@ -12,6 +12,7 @@ use glam::Vec3;
 
 use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
 use super::backend::{Backend, ClockKind};
+use crate::physics::sh::MAX_ORDER;
 use crate::render::tonemap::ViewTransform;
 use crate::scene::L1Kind;
 use crate::scene::{Light, Method};
@@ -195,7 +196,7 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
          between lights, slower re-sampling. Each walk estimates all N+1 terms of \
          J at the light without bias.",
     );
-    ui.add(Slider::new(&mut s.sh_order, 0..=8).text("SH order"))
+    ui.add(Slider::new(&mut s.sh_order, 0..=MAX_ORDER).text("SH order"))
         .on_hover_text(
             "Spherical-harmonic order of each light's angular lobe. 0: every light \
              glows the same in all directions; higher orders keep the forward peak \
