@@ -29,6 +29,7 @@ use glam::Vec3;
 use crate::cli::InternalArgs;
 use crate::cpu::Renderer;
 use crate::render::export::{read_exr, write_exr};
+use crate::render::film::image_mean;
 use crate::render::plot::{Plot, Series};
 use crate::render::{Film, Prepared};
 use crate::scene::{Method, RenderSettings};
@@ -420,7 +421,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
         let (a1, a2) = (render(101)?, render(202)?);
         let secs = start.elapsed().as_secs_f64();
         let (bias, noise) = split_bias(&a1, &a2, &converged, &converged_var);
-        let m = |img: &[Vec3]| img.iter().map(|v| (v.x + v.y + v.z) as f64).sum::<f64>();
+        let m = |img: &[Vec3]| image_mean(img).element_sum() as f64;
         let _ = writeln!(
             report,
             "\nwhat the internal lights converge to (two renders of {p} passes, {secs:.1} s): \

@@ -41,7 +41,7 @@ use lantern::gpu::shaders::{ModuleSource, MODULES};
 use lantern::gpu::GpuRenderer;
 use lantern::physics::internal::InternalLights;
 use lantern::render::{internal_params, Film, Prepared};
-use lantern::scene::{ClockKind, InternalSettings, L1Kind, Method};
+use lantern::scene::{ClockKind, InternalSettings, L1Kind, Method, RenderSettings};
 
 /// Parses and validates one assembled module, naming the file and line of
 /// the first error.
@@ -310,9 +310,15 @@ fn agree_gather(scene: &str, clock: ClockKind, l1: L1Kind, side: u32, spp: u32) 
 }
 
 /// [`agree_gather`] with the scene's internal-lights settings changed by
-/// `edit`.
-fn agree_gather_with(scene: &str, side: u32, spp: u32, edit: impl FnOnce(&mut InternalSettings)) {
-    let Some(ctx) = common::gpu() else { return };
+/// `edit`; returns the prepared scene, the settings (edited) and the
+/// lights it gathered with, `None` without an adapter.
+fn agree_gather_with(
+    scene: &str,
+    side: u32,
+    spp: u32,
+    edit: impl FnOnce(&mut InternalSettings),
+) -> Option<(Arc<Prepared>, RenderSettings, Arc<InternalLights>)> {
+    let ctx = common::gpu()?;
     let prepared = prepare_small(scene, side);
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
@@ -345,6 +351,7 @@ fn agree_gather_with(scene: &str, side: u32, spp: u32, edit: impl FnOnce(&mut In
         &cpu,
         &format!("lights built in {build_secs:.2} s; CPU {cpu_secs:.2} s, GPU {gpu_secs:.2} s"),
     );
+    Some((prepared, settings, cache))
 }
 
 #[test]
@@ -407,21 +414,19 @@ fn gather_agrees_puffs_renewed_sets_unclamped() {
         s.lights = 1024;
         s.resample_every = 4;
     };
-    agree_gather_with("assets/scenes/puffs_grid.ron", 24, 256, edit);
-    if common::gpu().is_none() {
+    let Some((prepared, mut settings, unclamped)) =
+        agree_gather_with("assets/scenes/puffs_grid.ron", 24, 256, edit)
+    else {
         return;
-    }
-    let prepared = prepare_small("assets/scenes/puffs_grid.ron", 24);
-    let mut settings = prepared.scene.render.clone();
-    settings.method = Method::Internal;
-    edit(&mut settings.internal);
-    let unclamped = common::build_lights(&prepared, &settings);
+    };
+    // The same lights (the scene's seed) without renewals, so clamped.
+    settings.seed = prepared.scene.render.seed;
     settings.internal.resample_every = 0;
     let clamped = common::build_lights(&prepared, &settings);
     assert!(unclamped.params.renewed && !clamped.params.renewed);
     let mean = |cache| {
-        let img = common::gather_cpu(&prepared, &settings, cache, 64).mean();
-        img.iter().map(|v| v.x + v.y + v.z).sum::<f32>() / img.len() as f32
+        let m = common::gather_cpu(&prepared, &settings, cache, 64).image_mean();
+        m.x + m.y + m.z
     };
     let (u, c) = (mean(&unclamped), mean(&clamped));
     eprintln!("puffs, K = 4: image mean {u} unclamped, {c} clamped");

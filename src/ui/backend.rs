@@ -802,8 +802,8 @@ impl JobContext<'_> {
                 return Ok(self.next_command());
             }
             let start = Instant::now();
+            let renew = light_set_starting(&internal_settings, pass);
             for (e, engine) in engines.iter_mut() {
-                let renew = light_set_starting(&internal_settings, pass);
                 if let (Estimator::Internal, Some(set)) = (*e, renew) {
                     // A fresh light set (built on the CPU, as the first).
                     let params = internal_params_for_set(prepared, &internal_settings, set);

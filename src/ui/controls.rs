@@ -262,11 +262,11 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
     )
     .on_hover_text(
         "Passes rendered with one set of internal lights before a fresh set \
-             (the next seed) replaces it, the image keeping what it has \
-             accumulated. 0: one set for the whole render, whose walk noise (the \
-             blotches that K controls) stays in the image however long it refines; renewed \
-             sets average it out, at the cost of their walks. The gizmos show the \
-             first set.",
+         (the next seed) replaces it, the image keeping what it has \
+         accumulated. 0: one set for the whole render, whose walk noise (the \
+         blotches that K controls) stays in the image however long it refines; \
+         renewed sets average it out, at the cost of their walks. The gizmos \
+         show the first set.",
     );
 }
 
