@@ -1,7 +1,9 @@
 // The final gather of the internal-lights method (METHOD.md §6). Mirrors
 // `gather` and `field_l1_at` in src/physics/gather.rs, part for part. The
 // window `[0, w]` of the camera ray is cut into `samples` strata with one
-// jittered point `y` each (transmittance `T(x, y)` by ratio tracking):
+// jittered point `y` each (transmittance `T(x, y)` by ratio tracking),
+// placed by `points_along` (uniform, or following the extinction for the
+// optical-depth clock):
 //
 // - `single`: the k = 0 part of L₀, `∫ T b S₁ dt`, a marched single
 //   scatter with `S₁(y)` by next-event estimation at every point, and the
@@ -21,6 +23,74 @@
 //     sums in a vector; here the selection scans the live clusters again
 //     with the same arithmetic, which picks the same cluster without
 //     per-thread storage.
+
+// Where the gather's points go along a stretch of a ray (`SegmentPdf` in
+// src/physics/segment_pdf.rs): `SEGMENT_PIECES` equal pieces, uniform
+// (geometric clock) or each in proportion to the chance that light is
+// stopped in it, `e^{−τ_l} (1 − e^{−c_l Δ})` with `c_l` the larger grey
+// extinction at its ends and `τ_l` by the trapezoid rule, mixed with the
+// uniform share `SEGMENT_DEFENSIVE` (optical-depth clock); uniform within a
+// piece.
+const SEGMENT_PIECES: u32 = 8u;
+const SEGMENT_DEFENSIVE: f32 = 0.1;
+
+struct SegmentPdf {
+    t0: f32,
+    width: f32,
+    prob: array<f32, 8>,
+}
+
+// `SegmentPdf::uniform` over `[t0, t1]`.
+fn segment_pdf_uniform(t0: f32, t1: f32) -> SegmentPdf {
+    var pdf: SegmentPdf;
+    pdf.t0 = t0;
+    pdf.width = max(t1 - t0, 0.0) / f32(SEGMENT_PIECES);
+    for (var l = 0u; l < SEGMENT_PIECES; l++) {
+        pdf.prob[l] = 1.0 / f32(SEGMENT_PIECES);
+    }
+    return pdf;
+}
+
+// The gather's points along `[t0, t1]` of `origin + t dir` (`points_along`):
+// `SegmentPdf::by_extinction` for the optical-depth clock.
+fn points_along(clock: u32, origin: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> SegmentPdf {
+    var pdf = segment_pdf_uniform(t0, t1);
+    if clock == CLOCK_GEOMETRIC {
+        return pdf;
+    }
+    let sigma_g = max_element(scene.medium.sigma_t);
+    var stopped: array<f32, 8>;
+    var tau = 0.0;
+    var total = 0.0;
+    var c_a = sigma_g * density(origin + dir * t0);
+    for (var l = 0u; l < SEGMENT_PIECES; l++) {
+        let c_b = sigma_g * density(origin + dir * (t0 + f32(l + 1u) * pdf.width));
+        stopped[l] = exp(-tau) * (1.0 - exp(-max(c_a, c_b) * pdf.width));
+        total += stopped[l];
+        tau += 0.5 * (c_a + c_b) * pdf.width;
+        c_a = c_b;
+    }
+    if total > 0.0 && total < BIG {
+        let share = SEGMENT_DEFENSIVE / f32(SEGMENT_PIECES);
+        for (var l = 0u; l < SEGMENT_PIECES; l++) {
+            pdf.prob[l] = (1.0 - SEGMENT_DEFENSIVE) * stopped[l] / total + share;
+        }
+    }
+    return pdf;
+}
+
+// The point for `u ∈ [0, 1)` and `1 / pdf` there (`SegmentPdf::sample`).
+fn segment_sample(pdf: ptr<function, SegmentPdf>, u: f32) -> vec2<f32> {
+    var acc = 0.0;
+    var l = 0u;
+    while l < SEGMENT_PIECES - 1u && acc + (*pdf).prob[l] <= u {
+        acc += (*pdf).prob[l];
+        l += 1u;
+    }
+    let p = (*pdf).prob[l];
+    let within = clamp((u - acc) / p, 0.0, 1.0);
+    return vec2<f32>((*pdf).t0 + (f32(l) + within) * (*pdf).width, (*pdf).width / p);
+}
 
 // One gather estimate, by part (`GatherSample`).
 struct GatherSample {
@@ -90,10 +160,12 @@ fn single_beyond_window(
         return vec3<f32>(0.0);
     }
     let n = -dir;
-    let step = (end - window) / f32(samples);
+    var points = points_along(gather_params.clock, x, dir, window, end);
     var sum = vec3<f32>(0.0);
     for (var j = 0u; j < samples; j++) {
-        let t = window + (f32(j) + rng_next_f32(rng)) * step;
+        let ts = segment_sample(&points, (f32(j) + rng_next_f32(rng)) / f32(samples));
+        let t = ts.x;
+        let step = ts.y / f32(samples);
         let y = x + dir * t;
         let rho = density(y);
         if rho <= 0.0 {
@@ -132,9 +204,11 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     let samples = max(samples_in, 1u);
     // L₀ (both parts) and, for the field form, L₁: stratified points of
     // the window, ratio-tracked transmittance from `x`.
-    let step = window / f32(samples);
+    var points = points_along(clock, x, dir, 0.0, window);
     for (var j = 0u; j < samples; j++) {
-        let t = (f32(j) + rng_next_f32(rng)) * step;
+        let ts = segment_sample(&points, (f32(j) + rng_next_f32(rng)) / f32(samples));
+        let t = ts.x;
+        let step = ts.y / f32(samples);
         let y = x + dir * t;
         let rho = density(y);
         let j_hat = reconstruct_multi(y, n, rho, gather_params.scattered_offset);

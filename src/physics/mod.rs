@@ -18,6 +18,7 @@ pub mod phase;
 pub mod placement;
 pub mod reference;
 pub mod rng;
+pub mod segment_pdf;
 pub mod sh;
 pub mod tracking;
 pub mod volume;
