@@ -469,7 +469,7 @@ fn gather_agrees_thin_sphere_point_lights() {
 //   within the spread of image means between light sets.
 
 use lantern::gpu::walks::{build_internal_lights_gpu, place_lights_gpu};
-use lantern::physics::gated_walk::{accumulate_j_from, GateSettings};
+use lantern::physics::gated_walk::{accumulate_j_from, collision_probability, GateSettings};
 use lantern::physics::internal::{InternalParams, PLACEMENT_RESOLUTION};
 use lantern::physics::placement::PlacementDensity;
 use lantern::physics::reference::RR_START_DEPTH;
@@ -632,7 +632,7 @@ impl Moments {
 
 /// The CPU's walks at one light: per walk (uniform random directions), F,
 /// the multiply scattered part, what of it the walk carried through a
-/// collision, its l = 1 SH coefficients (×4π), each term; and per estimate
+/// collision (per unit chance of the collision), its l = 1 SH coefficients (×4π), each term; and per estimate
 /// the arriving light.
 struct CpuLight {
     f: Moments,
@@ -699,8 +699,11 @@ fn cpu_walks(
         let total: Vec3 = per_walk[1..].iter().sum();
         out.f.add(per_walk.get(1).copied().unwrap_or(Vec3::ZERO));
         out.multi.add(total);
-        out.scattered
-            .add(total - unscattered[1..].iter().sum::<Vec3>());
+        // Per unit chance of the collision, as the lights store it.
+        out.scattered.add(
+            (total - unscattered[1..].iter().sum::<Vec3>())
+                / collision_probability(vol, params.s_star, x, -n),
+        );
         sh_basis(1, n, &mut y);
         for c in 0..3 {
             out.sh1[c].add(total * y[c + 1] * four_pi);

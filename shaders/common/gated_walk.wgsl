@@ -120,6 +120,26 @@ fn march_clock(
     return ClockMarch(acc, false);
 }
 
+// The least `collision_probability` returns (`COLLISION_FLOOR`).
+const COLLISION_FLOOR: f32 = 0.05;
+
+// The chance that light travelling from `p` along `d` collides before it
+// leaves the box, `1 − e^{−τ}` with `τ` the grey optical depth to the exit
+// by the optical-depth clock's quadrature, never below `COLLISION_FLOOR`
+// (`collision_probability`): the walks divide their collided part by it,
+// the gather multiplies the reconstruction by it.
+fn collision_probability(s_star: f32, p: vec3<f32>, d: vec3<f32>) -> f32 {
+    let clip = medium_clip(p, d);
+    if !clip.hit {
+        return COLLISION_FLOOR;
+    }
+    let m = march_clock(CLOCK_OPTICAL_DEPTH, s_star, p, d, 0.0, clip.t1, clip.t1, BIG);
+    if m.reached {
+        return 1.0;
+    }
+    return max(1.0 - exp(-m.value), COLLISION_FLOOR);
+}
+
 // The sum over gates of what `accumulate_j_from` added before the walk's
 // first collision (`accumulate_j_split`'s `unscattered`, summed over k):
 // reset at the start of each walk.

@@ -11,7 +11,9 @@
 //   the ray up to a clock of `(N+1) s*` (`single_beyond_window`).
 // - `reconstructed`: the rest of the k ≥ 1 part of L₀, `∫ T Ĵ dt` with `Ĵ`
 //   the kernel reconstruction of what the walks carried through a
-//   collision (`reconstruct_multi` at `scattered_offset`).
+//   collision (`reconstruct_multi` at `scattered_offset`, per unit chance
+//   of the collision, times `collision_probability` at `y`:
+//   `reconstruct_collided`).
 // - `internal`: L₁, in the form `gather_params.l1_form` says:
 //   - field (`L1_FIELD`, default): at each point `y`, one scattering of
 //     the reconstructed field `J = S₁ + Ĵ` at `x' = y − r n'`, `n'` drawn
@@ -211,7 +213,11 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         let step = ts.y / f32(samples);
         let y = x + dir * t;
         let rho = density(y);
-        let j_hat = reconstruct_multi(y, n, rho, gather_params.scattered_offset);
+        // The collided part is stored per unit chance of the collision.
+        var j_hat = reconstruct_multi(y, n, rho, gather_params.scattered_offset);
+        if any(j_hat != vec3<f32>(0.0)) {
+            j_hat *= collision_probability(gather_params.s_star, y, dir);
+        }
         var s1 = vec3<f32>(0.0);
         var l1 = vec3<f32>(0.0);
         if rho > 0.0 {

@@ -123,8 +123,12 @@ fn walk_lights(
         total += per_walk[k];
     }
     // What the walk carried through a collision (`walk_unscattered`: the
-    // rest, which the gather marches exactly).
-    let after_collision = total - walk_unscattered;
+    // rest, which the gather marches exactly), per unit chance of the
+    // collision (`Part::Scattered`).
+    var after_collision = vec3<f32>(0.0);
+    if w < wp.walks {
+        after_collision = (total - walk_unscattered) / collision_probability(wp.s_star, x, -n);
+    }
     var first = vec3<f32>(0.0);
     if terms >= 1u {
         first = per_walk[1];

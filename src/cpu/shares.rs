@@ -7,7 +7,7 @@
 //! camera-side transmittance comes from a midpoint quadrature of the
 //! extinction; each light within reach adds its kernel-reconstruction weight
 //! times the part of `J` that `L₀` reconstructs (what the walks carried
-//! through a collision) and its single-scatter term `V_i b P T J / (r² + h²)`, with the
+//! through a collision, times the chance of one from the point) and its single-scatter term `V_i b P T J / (r² + h²)`, with the
 //! light-side transmittance from a coarser quadrature ([`SHADOW_STEPS`]
 //! points). Luminance-like sums of the RGB parts are normalised to shares.
 //! `L₁`'s part is attributed by the note's point-light form for both
@@ -17,7 +17,7 @@
 
 use glam::Vec3;
 
-use crate::physics::gated_walk::{march_clock, Clock, ClockMarch};
+use crate::physics::gated_walk::{collision_probability, march_clock, Clock, ClockMarch};
 use crate::physics::internal::InternalLights;
 use crate::physics::phase;
 use crate::physics::sh::{sh_basis, MAX_COUNT};
@@ -94,8 +94,10 @@ pub fn light_shares<D: DensityField>(
         });
         let scale_y = cache.reconstruction_scale(rho);
         if den > 0.0 && scale_y > 0.0 {
+            // The collided part is stored per unit chance of the collision.
+            let chance = collision_probability(vol, cache.s_star, y, dir);
             for (i, k) in weights {
-                let j = cache.eval_scattered_with(i, &basis);
+                let j = cache.eval_scattered_with(i, &basis) * chance;
                 share[i] += lum(tr * j) * k * cache.recon_scale[i] * scale_y / den * dt;
             }
         }

@@ -244,6 +244,49 @@ pub enum ClockMarch {
     Exhausted(f32),
 }
 
+/// The chance that light travelling from `p` along `d` collides before it
+/// leaves the medium's box, `1 − e^{−τ}` with `τ` the grey optical depth
+/// to the exit (the optical-depth clock's quadrature; `s_star` sets its
+/// lattice), never below [`COLLISION_FLOOR`]: a walk from a light at the
+/// very edge that collides all the same would otherwise weigh `1/P`
+/// without bound (any positive factor divided out at the lights and
+/// multiplied back at the point is exact in the limit; the floor only
+/// leaves the last sliver of the horizon to the harmonics). The walks divide what they carried through a collision by it
+/// at the light and the gather multiplies the reconstruction by it at the
+/// camera ray's point (see [`super::internal::Part::Scattered`]): near the
+/// surface of a medium it falls from nearly one to nothing across the
+/// directions that leave it, a horizon that low-order spherical harmonics
+/// and a kernel reaching deeper in would smear.
+pub fn collision_probability<D: DensityField>(
+    vol: &Volume<D>,
+    s_star: f32,
+    p: Vec3,
+    d: Vec3,
+) -> f32 {
+    let Some((_, exit)) = vol.clip(p, d) else {
+        return COLLISION_FLOOR;
+    };
+    let tau = match march_clock(
+        vol,
+        Clock::OpticalDepth,
+        s_star,
+        p,
+        d,
+        0.0,
+        exit,
+        exit,
+        f32::INFINITY,
+    ) {
+        ClockMarch::Exhausted(tau) => tau,
+        ClockMarch::Reached(_) => return 1.0,
+    };
+    (-(-tau).exp_m1()).max(COLLISION_FLOOR)
+}
+
+/// The least [`collision_probability`] returns (mirrored in
+/// `shaders/common/gated_walk.wgsl`).
+pub const COLLISION_FLOOR: f32 = 0.05;
+
 /// Advances `clock` (gating windows of `s_star`) along `origin + t dir`
 /// from `t0` (inside or on the medium's box) towards `t_stop ≤ t_exit`,
 /// where `t_exit` is where the ray leaves the box. Returns where the clock

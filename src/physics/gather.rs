@@ -23,8 +23,9 @@
 //!   over the window these add up to that march).
 //! - **reconstructed**: the rest of the `k ≥ 1` part of `L₀`, `∫ T Ĵ dt`
 //!   with `Ĵ` the kernel reconstruction
-//!   ([`InternalLights::reconstruct_multi`]) of what the walks carried
-//!   through a collision ([`Part::Scattered`]).
+//!   ([`InternalLights::reconstruct_collided`]) of what the walks carried
+//!   through a collision ([`Part::Scattered`]: per unit chance of that
+//!   collision, times the chance at `y`).
 //! - **internal**: `L₁`, one scattering inside the window of light that
 //!   left a source `J` earlier in the window (clock from `x` to `y` plus
 //!   clock from `y` to the source at most `s*`), in one of two forms
@@ -245,7 +246,7 @@ pub fn gather<D: DensityField>(
         let step = inv_pdf / samples as f32;
         let y = x + dir * t;
         let rho = vol.density.density(y);
-        let j_hat = cache.reconstruct_multi(y, n, rho, Part::Scattered);
+        let j_hat = cache.reconstruct_collided(vol, y, n, rho);
         let (s1, l1) = if rho > 0.0 {
             let s1 = cache.scatter * rho * single_scatter_source(vol, lights, y, n, rng);
             let l1 = if field {
@@ -526,7 +527,8 @@ mod tests {
 
     /// One isotropic internal light in a homogeneous cube gathers, on
     /// average, to the quadrature of METHOD.md §6's `L₀` (its kernel
-    /// reconstruction: `J` within `h` of the light) plus `L₁`, for both
+    /// reconstruction: `J` within `h` of the light, its collided part times
+    /// the chance of a collision before the far face) plus `L₁`, for both
     /// clocks (which agree here: with ρ = 1, τ = σ_t ℓ).
     #[test]
     fn one_isotropic_light_matches_quadrature() {
@@ -553,7 +555,9 @@ mod tests {
             let tr = (-(sigma as f64) * t).exp();
             let r = (y - xi).length() as f64;
             if r < h as f64 {
-                l0 += tr * dt;
+                // The collided part is per unit chance of a collision
+                // along the ray's rest (2 − t to the cube's far face).
+                l0 += tr * -(-(sigma as f64) * (2.0 - t)).exp_m1() * dt;
             }
             if t + r <= s_geo as f64 {
                 let n_light = (y - xi) / r as f32;
@@ -621,8 +625,10 @@ mod tests {
 
     /// The field form of `L₁` against its closed form: with the camera
     /// inside a homogeneous medium whose reconstructed `J` is the same
-    /// isotropic `J₀` everywhere (a lattice of lights, no external lights),
-    /// `L₀ = J₀ (1 − e^{−σ s})/σ` and
+    /// isotropic `J₀` everywhere (a lattice of lights, no external lights;
+    /// the collided part times the chance of a collision before the face
+    /// `D` ahead, `1 − e^{−σ(D − t)}`),
+    /// `L₀ = J₀ ((1 − e^{−σ s})/σ − s e^{−σ D})` and
     /// `L₁ = b J₀ ∫₀^s e^{−σt} (1 − e^{−σ(s−t)})/σ dt
     ///     = (b J₀/σ) ((1 − e^{−σ s})/σ − s e^{−σ s})`,
     /// for both clocks (`s` the window as a distance).
@@ -647,7 +653,9 @@ mod tests {
         }
         let (sd, b) = (s_geo as f64, (albedo * sigma) as f64);
         let e = (-(sigma as f64) * sd).exp();
-        let l0 = j0.as_dvec3() * ((1.0 - e) / sigma as f64);
+        // The camera at y = −0.02 looks along +y: the face is 1.02 ahead.
+        let far = (-(sigma as f64) * 1.02).exp();
+        let l0 = j0.as_dvec3() * ((1.0 - e) / sigma as f64 - sd * far);
         let l1 = j0.as_dvec3() * (b / sigma as f64 * ((1.0 - e) / sigma as f64 - sd * e));
         for clock in [Clock::Geometric, Clock::OpticalDepth] {
             let s_star = match clock {

@@ -46,7 +46,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::gated_walk::{accumulate_j_from, Clock, GateSettings};
+use super::gated_walk::{accumulate_j_from, collision_probability, Clock, GateSettings};
 use super::light_index::LightGrid;
 use super::lights::Lights;
 use super::phase;
@@ -135,7 +135,16 @@ pub enum Part {
     All,
     /// What the walks carried through at least one collision: `L₀`'s
     /// `k ≥ 1` part, whose unscattered rest (single scatter from `k s*`
-    /// further along the ray) the gather marches exactly.
+    /// further along the ray) the gather marches exactly. Stored and
+    /// reconstructed **per unit chance of that collision**,
+    /// [`collision_probability`] along `−n`: the walks divide by it at the
+    /// light, and [`InternalLights::reconstruct_collided`] multiplies by it
+    /// at the point. Near the surface of a puff that chance drops from
+    /// nearly one to nothing across the directions that leave the medium;
+    /// projected as it was, order-4 harmonics and a kernel that reaches
+    /// lights deeper in smeared that horizon, and the dim edges of the
+    /// puffs came out 7…20 % bright at small `s*` (README, "What the
+    /// internal lights converge to").
     Scattered,
 }
 
@@ -189,8 +198,8 @@ pub struct InternalLights {
     pub(crate) multi_coeffs: Vec<Vec3>,
     /// The part of `Σ_{k≥1} J_k` carried through at least one collision
     /// (what `L₀` reconstructs; the rest is single scatter from further
-    /// along the ray, which the gather marches exactly), `sh_count` per
-    /// light.
+    /// along the ray, which the gather marches exactly), per unit chance of
+    /// the collision ([`Part::Scattered`]), `sh_count` per light.
     pub(crate) scattered_coeffs: Vec<Vec3>,
     /// Light arriving at each internal light from each external light,
     /// `T E`, `external_count` per light.
@@ -229,7 +238,8 @@ pub struct LightSources {
     /// `J`'s `k ≥ 1` part, per light, as `f_coeffs`.
     pub multi_coeffs: Vec<Vec3>,
     /// The part of `multi_coeffs` the walks carried through at least one
-    /// collision, per light, as `f_coeffs`.
+    /// collision, per unit chance of the collision ([`Part::Scattered`]),
+    /// per light, as `f_coeffs`.
     pub scattered_coeffs: Vec<Vec3>,
     /// The light arriving from each external light (in `Lights`' order,
     /// suns first), per light.
@@ -434,7 +444,9 @@ impl InternalLights {
                     if total == Vec3::ZERO {
                         continue;
                     }
-                    let after_collision = total - unscattered[1..].iter().sum::<Vec3>();
+                    // Per unit chance of the collision (see `Part::Scattered`).
+                    let after_collision = (total - unscattered[1..].iter().sum::<Vec3>())
+                        / collision_probability(vol, params.s_star, x, -n);
                     let first = per_walk.get(1).copied().unwrap_or(Vec3::ZERO);
                     sh_basis(order, n, &mut y);
                     for c in 0..count {
@@ -653,8 +665,9 @@ impl InternalLights {
     }
 
     /// What of `Σ_{k≥1} J_k(x_i, n)` the walks carried through a collision
-    /// (the part `L₀` reconstructs), with the basis `y` of `n` already
-    /// evaluated (clamped at zero).
+    /// (the part `L₀` reconstructs), per unit chance of the collision
+    /// ([`Part::Scattered`]), with the basis `y` of `n` already evaluated
+    /// (clamped at zero).
     #[inline]
     pub(crate) fn eval_scattered_with(&self, i: usize, y: &[f32]) -> Vec3 {
         let c = &self.scattered_coeffs[i * self.sh_count..(i + 1) * self.sh_count];
@@ -680,7 +693,8 @@ impl InternalLights {
     }
 
     /// Light `i`'s SH coefficients of the part of `Σ_{k≥1} J_k` that the
-    /// walks carried through at least one collision.
+    /// walks carried through at least one collision, per unit chance of the
+    /// collision ([`Part::Scattered`]).
     pub fn scattered_coefficients(&self, i: usize) -> &[Vec3] {
         &self.scattered_coeffs[i * self.sh_count..(i + 1) * self.sh_count]
     }
@@ -753,6 +767,23 @@ impl InternalLights {
         } else {
             (num * (scale_p / den)).max(Vec3::ZERO)
         }
+    }
+
+    /// The collided part of `Σ_{k≥1} J_k` at `p` towards `n` (what `L₀`
+    /// reconstructs): the kernel reconstruction of [`Part::Scattered`]
+    /// times the chance of a collision along `−n` from `p`.
+    pub fn reconstruct_collided<D: DensityField>(
+        &self,
+        vol: &Volume<D>,
+        p: Vec3,
+        n: Vec3,
+        density_at_p: f32,
+    ) -> Vec3 {
+        let j = self.reconstruct_multi(p, n, density_at_p, Part::Scattered);
+        if j == Vec3::ZERO {
+            return j;
+        }
+        j * collision_probability(vol, self.s_star, p, -n)
     }
 
     /// The factor that turns the kernel average back into `Ĵ` at a point of
