@@ -133,7 +133,8 @@ fn collision_probability(s_star: f32, p: vec3<f32>, d: vec3<f32>) -> f32 {
     if !clip.hit {
         return COLLISION_FLOOR;
     }
-    let m = march_clock(CLOCK_OPTICAL_DEPTH, s_star, p, d, 0.0, clip.t1, clip.t1, BIG);
+    // Past an optical depth of 12 (`COLLISION_DEPTH`) the chance is one.
+    let m = march_clock(CLOCK_OPTICAL_DEPTH, s_star, p, d, 0.0, clip.t1, clip.t1, 12.0);
     if m.reached {
         return 1.0;
     }

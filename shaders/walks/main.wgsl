@@ -127,7 +127,10 @@ fn walk_lights(
     // collision (`Part::Scattered`).
     var after_collision = vec3<f32>(0.0);
     if w < wp.walks {
-        after_collision = (total - walk_unscattered) / collision_probability(wp.s_star, x, -n);
+        after_collision = total - walk_unscattered;
+        if any(after_collision != vec3<f32>(0.0)) {
+            after_collision /= collision_probability(wp.s_star, x, -n);
+        }
     }
     var first = vec3<f32>(0.0);
     if terms >= 1u {

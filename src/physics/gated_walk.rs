@@ -275,13 +275,17 @@ pub fn collision_probability<D: DensityField>(
         0.0,
         exit,
         exit,
-        f32::INFINITY,
+        COLLISION_DEPTH,
     ) {
         ClockMarch::Exhausted(tau) => tau,
         ClockMarch::Reached(_) => return 1.0,
     };
     (-(-tau).exp_m1()).max(COLLISION_FLOOR)
 }
+
+/// The optical depth past which [`collision_probability`] stops marching
+/// and returns one (`1 − e^{−12}` differs from it by 6e-6).
+pub const COLLISION_DEPTH: f32 = 12.0;
 
 /// The least [`collision_probability`] returns (mirrored in
 /// `shaders/common/gated_walk.wgsl`).

@@ -444,9 +444,12 @@ impl InternalLights {
                     if total == Vec3::ZERO {
                         continue;
                     }
-                    // Per unit chance of the collision (see `Part::Scattered`).
-                    let after_collision = (total - unscattered[1..].iter().sum::<Vec3>())
-                        / collision_probability(vol, params.s_star, x, -n);
+                    // Per unit chance of the collision (see `Part::Scattered`;
+                    // a walk that carried nothing through one needs no march).
+                    let mut after_collision = total - unscattered[1..].iter().sum::<Vec3>();
+                    if after_collision != Vec3::ZERO {
+                        after_collision /= collision_probability(vol, params.s_star, x, -n);
+                    }
                     let first = per_walk.get(1).copied().unwrap_or(Vec3::ZERO);
                     sh_basis(order, n, &mut y);
                     for c in 0..count {
