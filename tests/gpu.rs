@@ -632,8 +632,8 @@ impl Moments {
 
 /// The CPU's walks at one light: per walk (uniform random directions), F,
 /// the multiply scattered part, what of it the walk carried through a
-/// collision (per unit chance of the collision), its l = 1 SH coefficients (×4π), each term; and per estimate
-/// the arriving light.
+/// collision (per unit chance of the collision), its l = 1 SH coefficients
+/// (×4π), each term; and per estimate the arriving light.
 struct CpuLight {
     f: Moments,
     multi: Moments,

@@ -52,19 +52,32 @@ fn noise_corrected_rmse(
     (se.max(0.0) / n).sqrt() / (mean / n).max(1e-30)
 }
 
-fn check(rel: &str, lights: u32, reference_spp: u32) {
-    let prepared = std::sync::Arc::new(common::prepare_with(rel, |s| {
+/// The scene at 32², optical-depth clock, field form of `L₁`, with these
+/// window, truncation, lights, walks and SH order.
+fn prepare_32(
+    rel: &str,
+    s_star: f32,
+    terms: u32,
+    lights: u32,
+    walks: u32,
+    sh_order: u32,
+) -> std::sync::Arc<lantern::render::prepared::Prepared> {
+    std::sync::Arc::new(common::prepare_with(rel, |s| {
         s.camera.width = 32;
         s.camera.height = 32;
         let i = &mut s.render.internal;
         i.clock = ClockKind::OpticalDepth;
-        i.s_star = Some(0.5);
-        i.terms = 80;
+        i.s_star = Some(s_star);
+        i.terms = terms;
         i.lights = lights;
-        i.walks = 1024;
-        i.sh_order = 3;
+        i.walks = walks;
+        i.sh_order = sh_order;
         i.l1 = L1Kind::Field;
-    }));
+    }))
+}
+
+fn check(rel: &str, lights: u32, reference_spp: u32) {
+    let prepared = prepare_32(rel, 0.5, 80, lights, 1024, 3);
     let reference = common::render(&prepared, Method::Reference, 7, reference_spp);
     let internal = common::render(&prepared, Method::Internal, 8, 2048);
     let (err, rmse) = compare(&internal.mean(), &reference.mean());
@@ -110,18 +123,7 @@ fn puffs_grid_agrees_with_reference() {
 /// is asserted within 5 % in mean, and the image within 3 %.
 #[test]
 fn puffs_short_window_keeps_the_dim_edges() {
-    let prepared = std::sync::Arc::new(common::prepare_with("assets/scenes/puffs_grid.ron", |s| {
-        s.camera.width = 32;
-        s.camera.height = 32;
-        let i = &mut s.render.internal;
-        i.clock = ClockKind::OpticalDepth;
-        i.s_star = Some(0.25);
-        i.terms = 160;
-        i.lights = 16384;
-        i.walks = 256;
-        i.sh_order = 4;
-        i.l1 = L1Kind::Field;
-    }));
+    let prepared = prepare_32("assets/scenes/puffs_grid.ron", 0.25, 160, 16384, 256, 4);
     let reference = common::render(&prepared, Method::Reference, 7, 16384);
     let internal = common::render(&prepared, Method::Internal, 8, 512);
     let (a, b) = (internal.mean(), reference.mean());

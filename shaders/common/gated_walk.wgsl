@@ -122,10 +122,13 @@ fn march_clock(
 
 // The least `collision_probability` returns (`COLLISION_FLOOR`).
 const COLLISION_FLOOR: f32 = 0.05;
+// The optical depth past which it is one (`COLLISION_DEPTH`).
+const COLLISION_DEPTH: f32 = 12.0;
 
 // The chance that light travelling from `p` along `d` collides before it
 // leaves the box, `1 − e^{−τ}` with `τ` the grey optical depth to the exit
-// by the optical-depth clock's quadrature, never below `COLLISION_FLOOR`
+// by the optical-depth clock's quadrature, one past `COLLISION_DEPTH`,
+// never below `COLLISION_FLOOR`
 // (`collision_probability`): the walks divide their collided part by it,
 // the gather multiplies the reconstruction by it.
 fn collision_probability(s_star: f32, p: vec3<f32>, d: vec3<f32>) -> f32 {
@@ -133,8 +136,7 @@ fn collision_probability(s_star: f32, p: vec3<f32>, d: vec3<f32>) -> f32 {
     if !clip.hit {
         return COLLISION_FLOOR;
     }
-    // Past an optical depth of 12 (`COLLISION_DEPTH`) the chance is one.
-    let m = march_clock(CLOCK_OPTICAL_DEPTH, s_star, p, d, 0.0, clip.t1, clip.t1, 12.0);
+    let m = march_clock(CLOCK_OPTICAL_DEPTH, s_star, p, d, 0.0, clip.t1, clip.t1, COLLISION_DEPTH);
     if m.reached {
         return 1.0;
     }

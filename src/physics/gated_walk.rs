@@ -247,16 +247,18 @@ pub enum ClockMarch {
 /// The chance that light travelling from `p` along `d` collides before it
 /// leaves the medium's box, `1 − e^{−τ}` with `τ` the grey optical depth
 /// to the exit (the optical-depth clock's quadrature; `s_star` sets its
-/// lattice), never below [`COLLISION_FLOOR`]: a walk from a light at the
-/// very edge that collides all the same would otherwise weigh `1/P`
-/// without bound (any positive factor divided out at the lights and
-/// multiplied back at the point is exact in the limit; the floor only
-/// leaves the last sliver of the horizon to the harmonics). The walks divide what they carried through a collision by it
-/// at the light and the gather multiplies the reconstruction by it at the
-/// camera ray's point (see [`super::internal::Part::Scattered`]): near the
-/// surface of a medium it falls from nearly one to nothing across the
-/// directions that leave it, a horizon that low-order spherical harmonics
-/// and a kernel reaching deeper in would smear.
+/// lattice), one past [`COLLISION_DEPTH`] and never below
+/// [`COLLISION_FLOOR`]: a walk from a light at the very edge that collides
+/// all the same would otherwise weigh `1/P` without bound (any positive
+/// factor divided out at the lights and multiplied back at the point is
+/// exact in the limit; the floor only leaves the last sliver of the
+/// horizon to the harmonics). The walks divide what they carried through
+/// a collision by it at the light and the gather multiplies the
+/// reconstruction by it at the camera ray's point (see
+/// [`super::internal::Part::Scattered`]): near the surface of a medium it
+/// falls from nearly one to nothing across the directions that leave it,
+/// a horizon that low-order spherical harmonics and a kernel reaching
+/// deeper in would smear.
 pub fn collision_probability<D: DensityField>(
     vol: &Volume<D>,
     s_star: f32,
@@ -284,7 +286,8 @@ pub fn collision_probability<D: DensityField>(
 }
 
 /// The optical depth past which [`collision_probability`] stops marching
-/// and returns one (`1 − e^{−12}` differs from it by 6e-6).
+/// and returns one (`1 − e^{−12}` differs from it by 6e-6; mirrored in
+/// `shaders/common/gated_walk.wgsl`).
 pub const COLLISION_DEPTH: f32 = 12.0;
 
 /// The least [`collision_probability`] returns (mirrored in

@@ -10,7 +10,7 @@
 //! that follows where light is stopped along the window ([`SegmentPdf`]:
 //! every integrand here carries the extinction at `y` and the
 //! transmittance to it; on the puffs at 96², two points per ray, this cut
-//! the per-pass variance of the three parts 2.4×, 1.6× and 1.6× for 18 %
+//! the per-pass variance of the three parts 2.3×, 1.7× and 1.7× for 18 %
 //! more time per pass). Its parts are:
 //!
 //! - **single**: the `k = 0` part of `L₀`, `∫ T b S₁ dt`, with `S₁(y)` by
