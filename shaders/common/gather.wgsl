@@ -33,6 +33,10 @@
 // extinction at its ends and `τ_l` by the trapezoid rule, mixed with the
 // uniform share `SEGMENT_DEFENSIVE` (optical-depth clock); uniform within a
 // piece.
+// The gather's ratio tracking samples tentative collisions at this many
+// times the majorant (`TRACKING_RATE` in src/physics/gather.rs).
+const TRACKING_RATE: f32 = 8.0;
+
 const SEGMENT_PIECES: u32 = 8u;
 const SEGMENT_DEFENSIVE: f32 = 0.1;
 
@@ -173,11 +177,11 @@ fn single_beyond_window(
         if rho <= 0.0 {
             continue;
         }
-        let s1 = gather_params.scatter * rho * single_scatter_source(y, n, rng);
+        let s1 = gather_params.scatter * rho * single_scatter_source_at_rate(y, n, TRACKING_RATE, rng);
         if all(s1 == vec3<f32>(0.0)) {
             continue;
         }
-        sum += transmittance(x, dir, t, rng) * s1 * step;
+        sum += transmittance_at_rate(x, dir, t, TRACKING_RATE, rng) * s1 * step;
     }
     return sum;
 }
@@ -221,7 +225,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         var s1 = vec3<f32>(0.0);
         var l1 = vec3<f32>(0.0);
         if rho > 0.0 {
-            s1 = gather_params.scatter * rho * single_scatter_source(y, n, rng);
+            s1 = gather_params.scatter * rho * single_scatter_source_at_rate(y, n, TRACKING_RATE, rng);
             if field {
                 l1 = field_l1_at(x, dir, n, t, len, y, rho, rng);
             }
@@ -229,7 +233,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         if all(j_hat == vec3<f32>(0.0)) && all(l1 == vec3<f32>(0.0)) && all(s1 == vec3<f32>(0.0)) {
             continue;
         }
-        let tr = transmittance(x, dir, t, rng);
+        let tr = transmittance_at_rate(x, dir, t, TRACKING_RATE, rng);
         out.reconstructed += tr * j_hat * step;
         out.internal += tr * l1 * step;
         out.single += tr * s1 * step;
@@ -358,7 +362,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         if all(jv == vec3<f32>(0.0)) {
             continue;
         }
-        let tr = transmittance(x, dir, t, rng) * transmittance(y, -n_light, r, rng);
+        let tr = transmittance_at_rate(x, dir, t, TRACKING_RATE, rng) * transmittance_at_rate(y, -n_light, r, TRACKING_RATE, rng);
         if all(tr == vec3<f32>(0.0)) {
             continue;
         }
@@ -410,11 +414,11 @@ fn field_l1_at(
     let rho = density(xp);
     var jv = reconstruct_multi(xp, travel, rho, gather_params.multi_offset);
     if rho > 0.0 {
-        jv += gather_params.scatter * rho * single_scatter_source(xp, travel, rng);
+        jv += gather_params.scatter * rho * single_scatter_source_at_rate(xp, travel, TRACKING_RATE, rng);
     }
     if all(jv == vec3<f32>(0.0)) {
         return vec3<f32>(0.0);
     }
-    let tr = transmittance(y, back, r, rng);
+    let tr = transmittance_at_rate(y, back, r, TRACKING_RATE, rng);
     return gather_params.scatter * rho_y * tr * jv * r_max;
 }

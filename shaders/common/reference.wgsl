@@ -17,12 +17,18 @@ const MAX_COLLISIONS_GUARD: u32 = 4096u;
 // coefficient at `p` towards `n`, transmittance by ratio tracking
 // (`single_scatter_source`).
 fn single_scatter_source(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) -> vec3<f32> {
+    return single_scatter_source_at_rate(p, n, 1.0, rng);
+}
+
+// `single_scatter_source` with the shadow rays' ratio tracking at `rate`
+// times the majorant (`single_scatter_source_at_rate`).
+fn single_scatter_source_at_rate(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, Rng>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
     let count = light_count();
     for (var i = 0u; i < count; i++) {
         let l = light_at(i, p);
         let phase = hg(scene.medium.g, dot(l.travel, n));
-        let tr = transmittance(p, -l.travel, l.distance, rng);
+        let tr = transmittance_at_rate(p, -l.travel, l.distance, rate, rng);
         sum += l.irradiance * tr * phase;
     }
     return sum;

@@ -22,6 +22,9 @@ struct TentativeSampler {
     tau: f32,
     // Whether a collision was returned and a fresh `tau` is due.
     redraw: bool,
+    // Tentative collisions per unit of the majorant (1, or a ratio-tracking
+    // rate above it: `sample_tentative_at_rate`).
+    rate: f32,
 }
 
 // A tentative collision at distance `t` with the local majorant.
@@ -40,7 +43,22 @@ fn sample_tentative_start(
     t1: f32,
     rng: ptr<function, Rng>,
 ) -> TentativeSampler {
+    return sample_tentative_start_at_rate(origin, dir, t0, t1, 1.0, rng);
+}
+
+// `sample_tentative_start` with tentative collisions at `rate` times the
+// local majorant (`sample_tentative_at_rate`); the collisions it returns
+// carry that rate as their majorant.
+fn sample_tentative_start_at_rate(
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    t0: f32,
+    t1: f32,
+    rate: f32,
+    rng: ptr<function, Rng>,
+) -> TentativeSampler {
     var s: TentativeSampler;
+    s.rate = rate;
     s.tau = -log(1.0 - rng_next_f32(rng));
     s.dda = dda_start(origin, dir, t0, t1);
     s.has_segment = false;
@@ -71,7 +89,7 @@ fn sample_tentative_next(s: ptr<function, TentativeSampler>, rng: ptr<function, 
             }
             (*s).t = seg.t0;
             (*s).seg_t1 = seg.t1;
-            (*s).majorant = seg.majorant;
+            (*s).majorant = seg.majorant * (*s).rate;
             (*s).has_segment = true;
         }
         let m = (*s).majorant;
@@ -137,6 +155,19 @@ fn free_flight(
 // to distance `t_max` (clipped to the medium), per channel
 // (`transmittance`).
 fn transmittance(origin: vec3<f32>, dir: vec3<f32>, t_max: f32, rng: ptr<function, Rng>) -> vec3<f32> {
+    return transmittance_at_rate(origin, dir, t_max, 1.0, rng);
+}
+
+// `transmittance` with tentative collisions at `rate` (at least 1) times
+// the majorant (`transmittance_at_rate`): unbiased, and no longer a
+// yes-or-no estimate where the majorant is tight.
+fn transmittance_at_rate(
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    t_max: f32,
+    rate: f32,
+    rng: ptr<function, Rng>,
+) -> vec3<f32> {
     let clip = medium_clip(origin, dir);
     if !clip.hit {
         return vec3<f32>(1.0);
@@ -146,7 +177,7 @@ fn transmittance(origin: vec3<f32>, dir: vec3<f32>, t_max: f32, rng: ptr<functio
         return vec3<f32>(1.0);
     }
     var tr = vec3<f32>(1.0);
-    var s = sample_tentative_start(origin, dir, clip.t0, t1, rng);
+    var s = sample_tentative_start_at_rate(origin, dir, clip.t0, t1, max(rate, 1.0), rng);
     loop {
         let c = sample_tentative_next(&s, rng);
         if !c.found {

@@ -235,4 +235,45 @@ mod tests {
         assert_eq!(lines[first - 1], m.parts[1].source.lines().next().unwrap());
         assert_eq!(m.locate(1), None);
     }
+
+    /// The value of `const NAME: TYPE = VALUE;` in `part`, as a number.
+    fn wgsl_const(part: ShaderPart, name: &str) -> f64 {
+        let key = format!("const {name}:");
+        let line = part
+            .source
+            .lines()
+            .find(|l| l.trim_start().starts_with(&key))
+            .unwrap_or_else(|| panic!("{} has no {name}", part.path));
+        let value = line.split('=').nth(1).unwrap().trim().trim_end_matches(';');
+        value.trim_end_matches('u').parse().unwrap()
+    }
+
+    /// The constants that the WGSL estimators repeat agree with the CPU's.
+    #[test]
+    fn wgsl_constants_mirror_the_cpu() {
+        use crate::physics::{gated_walk, gather, segment_pdf};
+        let pairs = [
+            (GATHER, "TRACKING_RATE", gather::TRACKING_RATE as f64),
+            (GATHER, "SEGMENT_PIECES", segment_pdf::PIECES as f64),
+            (GATHER, "SEGMENT_DEFENSIVE", segment_pdf::DEFENSIVE as f64),
+            (
+                GATED_WALK,
+                "COLLISION_FLOOR",
+                gated_walk::COLLISION_FLOOR as f64,
+            ),
+            (
+                GATED_WALK,
+                "COLLISION_DEPTH",
+                gated_walk::COLLISION_DEPTH as f64,
+            ),
+        ];
+        for (part, name, cpu) in pairs {
+            let gpu = wgsl_const(part, name);
+            assert!(
+                (gpu - cpu).abs() <= 1e-6 * cpu.abs(),
+                "{}: {name} = {gpu}, the CPU's is {cpu}",
+                part.path
+            );
+        }
+    }
 }

@@ -11,7 +11,7 @@ use glam::Vec3;
 use super::lights::Lights;
 use super::phase;
 use super::rng::Rng;
-use super::tracking::{free_flight, transmittance};
+use super::tracking::{free_flight, transmittance_at_rate};
 use super::volume::{DensityField, Volume};
 
 /// Collisions after which Russian roulette starts.
@@ -29,10 +29,24 @@ pub fn single_scatter_source<D: DensityField>(
     n: Vec3,
     rng: &mut Rng,
 ) -> Vec3 {
+    single_scatter_source_at_rate(vol, lights, p, n, 1.0, rng)
+}
+
+/// [`single_scatter_source`] with the shadow rays' ratio tracking at
+/// `rate` times the majorant ([`transmittance_at_rate`]).
+#[inline]
+pub fn single_scatter_source_at_rate<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    p: Vec3,
+    n: Vec3,
+    rate: f32,
+    rng: &mut Rng,
+) -> Vec3 {
     let mut sum = Vec3::ZERO;
     lights.for_each_at(p, |l| {
         let phase = phase::hg(vol.optics.g, l.travel.dot(n));
-        let tr = transmittance(vol, p, -l.travel, l.distance, rng);
+        let tr = transmittance_at_rate(vol, p, -l.travel, l.distance, rate, rng);
         sum += l.irradiance * tr * phase;
     });
     sum
