@@ -287,6 +287,10 @@ pub enum Command {
     /// RMSE against time of both renderers against a converged reference,
     /// and their equal-error time ratio; writes a CSV and a PNG plot.
     Converge(crate::converge::ConvergeArgs),
+    /// Where the internal-lights image's noise comes from: per-pixel noise
+    /// of each part of the gather with one light set and across light sets,
+    /// and the distribution of single walks.
+    Noise(crate::noise::NoiseArgs),
 }
 
 /// Runs the command line; the binary's `main` calls this.
@@ -342,6 +346,7 @@ pub fn run(cli: Cli) -> Result<()> {
         }
         Some(Command::Validate(args)) => crate::validate::run(&args),
         Some(Command::Converge(args)) => crate::converge::run(&args),
+        Some(Command::Noise(args)) => crate::noise::run(&args),
     }
 }
 

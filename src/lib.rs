@@ -28,6 +28,7 @@ pub mod cli;
 pub mod converge;
 pub mod cpu;
 pub mod gpu;
+pub mod noise;
 pub mod physics;
 pub mod render;
 pub mod scene;

@@ -1,0 +1,517 @@
+//! `lantern noise`: where the internal-lights image's noise comes from
+//! (METHOD.md §4–§7: walk noise against the gather's own), measured.
+//!
+//! Three measurements, each relative to the mean of the whole image:
+//!
+//! - **Gather noise by part**: `P` passes with one light set (set 0), each
+//!   with its own pixel random streams; the per-pixel standard deviation
+//!   of one pass of each part of the gather ([`GatherSample`]: the marched
+//!   single scatter, `L₀`'s reconstruction, `L₁`). What more passes over
+//!   the same lights average away.
+//! - **Light-set noise by part**: `P` passes, pass `p` with light set `p`
+//!   and the *same* pixel random streams (those of pass 0), so that what
+//!   differs between passes is mostly the lights' walk noise. What only
+//!   renewed sets average away (`resample_every`).
+//! - **Walk statistics**: for the first lights of set 0, many time-gated
+//!   walks each (§4) starting towards the camera, and the distribution of
+//!   what each carried through a collision (the part `L₀` reconstructs):
+//!   its relative variance per walk, the fraction of walks that carried
+//!   nothing and the share of the mean carried by the top 1 % of walks.
+//!   A heavy tail there is noise that no kernel or SH order removes, only
+//!   more walks.
+//!
+//! With the time per set and per pass this gives each source's variance
+//! per second, the currency of an equal-error comparison (`lantern
+//! converge`).
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::cli::InternalArgs;
+use crate::physics::gated_walk::{accumulate_j_from, GateSettings};
+use crate::physics::gather::{gather, GatherSample};
+use crate::physics::internal::InternalLights;
+use crate::physics::reference::RR_START_DEPTH;
+use crate::physics::rng::Rng;
+use crate::render::{internal_params_for_set, Prepared};
+use crate::scene::{Method, RenderSettings};
+use crate::validate::load_square;
+
+/// Options of `lantern noise`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct NoiseArgs {
+    /// The scene file (.ron).
+    pub scene: PathBuf,
+    /// Image side in pixels (overrides the scene's camera; 0 keeps it).
+    #[arg(long, default_value_t = 128)]
+    pub size: u32,
+    /// Passes of each of the two image measurements (at least 2).
+    #[arg(long, default_value_t = 8)]
+    pub passes: u32,
+    /// Lights whose walks are measured one by one (0: skip).
+    #[arg(long, default_value_t = 64)]
+    pub walk_lights: u32,
+    /// Walks per measured light.
+    #[arg(long, default_value_t = 2000)]
+    pub walk_count: u32,
+    /// Internal-lights parameters (default: the scene's).
+    #[command(flatten)]
+    pub internal: InternalArgs,
+}
+
+/// Per-pixel noise of one pass, by part of the gather, relative to the
+/// mean of the whole image (channels averaged).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PartNoise {
+    /// Each part's share of the image mean: single, reconstructed, `L₁`.
+    pub share: [f64; 3],
+    /// Each part's per-pixel standard deviation of one pass, relative to
+    /// the image mean.
+    pub sd: [f64; 3],
+    /// The same for the sum of the parts.
+    pub total_sd: f64,
+    /// Seconds per pass (the gather only).
+    pub secs_per_pass: f64,
+}
+
+/// Distribution of one light's walk values.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WalkStats {
+    /// `Var / mean²` of one walk.
+    pub relative_variance: f64,
+    /// Fraction of the walks whose value is zero.
+    pub zero_fraction: f64,
+    /// Share of the sum carried by the largest 1 % of the values (at least
+    /// one value).
+    pub top_share: f64,
+}
+
+/// The statistics of `values` (one walk each); `None` if their mean is not
+/// positive.
+pub fn walk_stats(values: &[f64]) -> Option<WalkStats> {
+    let n = values.len();
+    if n == 0 {
+        return None;
+    }
+    let sum: f64 = values.iter().sum();
+    let mean = sum / n as f64;
+    if mean.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
+    let mut sorted = values.to_vec();
+    sorted.sort_by(|a, b| b.total_cmp(a));
+    let top = (n / 100).max(1);
+    Some(WalkStats {
+        relative_variance: var / (mean * mean),
+        zero_fraction: values.iter().filter(|v| **v == 0.0).count() as f64 / n as f64,
+        top_share: sorted[..top].iter().sum::<f64>() / sum,
+    })
+}
+
+/// Per-pixel sums of the three parts and their total, and of their squares.
+#[derive(Clone, Copy, Default)]
+struct Sums {
+    sum: [f64; 4],
+    sum2: [f64; 4],
+}
+
+/// `passes` gathers of every pixel; pass `p` uses `lights(p)` and the pixel
+/// random streams of pass `stream(p)`.
+fn part_noise(
+    prepared: &Prepared,
+    settings: &RenderSettings,
+    passes: u32,
+    lights: impl Fn(u32) -> Result<Arc<InternalLights>>,
+    stream: impl Fn(u32) -> u32,
+) -> Result<PartNoise> {
+    let cam = prepared.camera;
+    let n = (cam.width * cam.height) as usize;
+    let mut sums = vec![Sums::default(); n];
+    let mut gather_secs = 0.0;
+    for pass in 0..passes {
+        let cache = lights(pass)?;
+        let stream = stream(pass);
+        let start = Instant::now();
+        let samples: Vec<GatherSample> = (0..n)
+            .into_par_iter()
+            .map(|idx| {
+                let (x, y) = (idx as u32 % cam.width, idx as u32 / cam.width);
+                let mut rng = Rng::for_sample(settings.seed, idx as u32, stream);
+                let (jx, jy) = (rng.next_f32(), rng.next_f32());
+                let dir = cam.ray_dir(x as f32 + jx, y as f32 + jy);
+                gather(
+                    &prepared.volume,
+                    &prepared.lights,
+                    &cache,
+                    cam.eye,
+                    dir,
+                    settings.internal.light_samples,
+                    &mut rng,
+                )
+            })
+            .collect();
+        gather_secs += start.elapsed().as_secs_f64();
+        let grey = |v: Vec3| f64::from(v.x + v.y + v.z) / 3.0;
+        for (acc, s) in sums.iter_mut().zip(&samples) {
+            let parts = [grey(s.single), grey(s.reconstructed), grey(s.internal)];
+            let values = [parts[0], parts[1], parts[2], parts.iter().sum()];
+            for (c, v) in values.into_iter().enumerate() {
+                acc.sum[c] += v;
+                acc.sum2[c] += v * v;
+            }
+        }
+    }
+    let p = f64::from(passes);
+    let mut mean = [0.0f64; 4];
+    let mut var = [0.0f64; 4];
+    for acc in &sums {
+        for c in 0..4 {
+            let m = acc.sum[c] / p;
+            mean[c] += m;
+            var[c] += ((acc.sum2[c] / p - m * m) * p / (p - 1.0)).max(0.0);
+        }
+    }
+    let total_mean = mean[3] / n as f64;
+    if total_mean.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+        bail!("the image is black: nothing to measure the noise against");
+    }
+    let rel = |c: usize| (var[c] / n as f64).sqrt() / total_mean;
+    Ok(PartNoise {
+        share: [0, 1, 2].map(|c| mean[c] / n as f64 / total_mean),
+        sd: [0, 1, 2].map(rel),
+        total_sd: rel(3),
+        secs_per_pass: gather_secs / p,
+    })
+}
+
+/// Walk statistics of the first `count` lights of `cache` with density
+/// (each `walks` walks towards `eye`), averaged over the lights whose mean
+/// is positive; `None` if none is.
+pub fn light_walk_stats(
+    prepared: &Prepared,
+    cache: &InternalLights,
+    eye: Vec3,
+    count: usize,
+    walks: u32,
+) -> Option<(usize, WalkStats)> {
+    let gate = GateSettings {
+        s_star: cache.s_star,
+        n_terms: cache.params.terms,
+        clock: cache.params.clock,
+        rr_start: RR_START_DEPTH,
+    };
+    let gates = gate.gate_count();
+    let stats: Vec<WalkStats> = cache
+        .lights
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| l.density > 0.0)
+        .take(count)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .filter_map(|(i, light)| {
+            let n = (eye - light.position).normalize_or_zero();
+            if n == Vec3::ZERO {
+                return None;
+            }
+            let mut rng = Rng::for_sample(cache.params.seed ^ 0x5eed, i as u32, 0);
+            let mut out = vec![Vec3::ZERO; gates];
+            let mut unscattered = vec![Vec3::ZERO; gates];
+            let values: Vec<f64> = (0..walks)
+                .map(|_| {
+                    out.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                    unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                    accumulate_j_from(
+                        &prepared.volume,
+                        &prepared.lights,
+                        light.position,
+                        n,
+                        &gate,
+                        1,
+                        &mut rng,
+                        &mut out,
+                        Some(&mut unscattered),
+                    );
+                    let collided: Vec3 =
+                        out[1..].iter().sum::<Vec3>() - unscattered[1..].iter().sum::<Vec3>();
+                    f64::from(collided.x + collided.y + collided.z) / 3.0
+                })
+                .collect();
+            walk_stats(&values)
+        })
+        .collect();
+    if stats.is_empty() {
+        return None;
+    }
+    let k = stats.len() as f64;
+    Some((
+        stats.len(),
+        WalkStats {
+            relative_variance: stats.iter().map(|s| s.relative_variance).sum::<f64>() / k,
+            zero_fraction: stats.iter().map(|s| s.zero_fraction).sum::<f64>() / k,
+            top_share: stats.iter().map(|s| s.top_share).sum::<f64>() / k,
+        },
+    ))
+}
+
+/// What `lantern noise` measured.
+#[derive(Clone, Debug)]
+pub struct NoiseReport {
+    /// Seconds to build one light set (placement and walks), set 0.
+    pub set_secs: f64,
+    /// Gather noise (one set, fresh pixel streams).
+    pub gather: PartNoise,
+    /// Light-set noise (fresh sets, the same pixel streams).
+    pub sets: PartNoise,
+    /// Walk statistics: lights measured and their average.
+    pub walks: Option<(usize, WalkStats)>,
+}
+
+/// Measures the noise of `settings`' internal lights on `prepared`.
+pub fn measure(
+    prepared: &Prepared,
+    settings: &RenderSettings,
+    args: &NoiseArgs,
+) -> Result<NoiseReport> {
+    if args.passes < 2 {
+        bail!("--passes must be at least 2 (a variance needs two samples)");
+    }
+    let never = AtomicBool::new(false);
+    let build = |set: u32| -> Result<Arc<InternalLights>> {
+        let params = internal_params_for_set(prepared, settings, set);
+        prepared
+            .build_internal_lights(&params, &never)
+            .map(Arc::new)
+            .context("the light set's build was cancelled")
+    };
+    let start = Instant::now();
+    let first = build(0)?;
+    let set_secs = start.elapsed().as_secs_f64();
+    let gather = part_noise(
+        prepared,
+        settings,
+        args.passes,
+        |_| Ok(first.clone()),
+        |p| p,
+    )?;
+    let sets = part_noise(
+        prepared,
+        settings,
+        args.passes,
+        |p| if p == 0 { Ok(first.clone()) } else { build(p) },
+        |_| 0,
+    )?;
+    let walks = if args.walk_lights > 0 && args.walk_count > 1 {
+        light_walk_stats(
+            prepared,
+            &first,
+            prepared.camera.eye,
+            args.walk_lights as usize,
+            args.walk_count,
+        )
+    } else {
+        None
+    };
+    Ok(NoiseReport {
+        set_secs,
+        gather,
+        sets,
+        walks,
+    })
+}
+
+/// The report as a Markdown table.
+pub fn format_report(
+    name: &str,
+    size: (u32, u32),
+    settings: &RenderSettings,
+    r: &NoiseReport,
+) -> String {
+    let i = &settings.internal;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "\n### {name} {}×{}: noise of the internal lights (M {}, K {}, N {}, s* {}, SH order {}, {} light samples)\n",
+        size.0,
+        size.1,
+        i.lights,
+        i.walks,
+        i.terms,
+        i.s_star.map_or("scene default".to_owned(), |v| v.to_string()),
+        i.sh_order,
+        i.light_samples
+    );
+    let _ = writeln!(
+        s,
+        "one light set: {:.3} s; one gather pass: {:.3} s\n",
+        r.set_secs, r.gather.secs_per_pass
+    );
+    let _ = writeln!(
+        s,
+        "| per-pixel sd of one pass, % of the image mean | single | reconstructed | L1 | total |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "| share of the image mean | {:.1} % | {:.1} % | {:.1} % | 100 % |",
+        100.0 * r.gather.share[0],
+        100.0 * r.gather.share[1],
+        100.0 * r.gather.share[2]
+    );
+    for (label, p) in [
+        ("gather (one set, fresh pixel streams)", &r.gather),
+        ("light sets (fresh sets, same pixel streams)", &r.sets),
+    ] {
+        let _ = writeln!(
+            s,
+            "| {label} | {:.1} % | {:.1} % | {:.1} % | {:.1} % |",
+            100.0 * p.sd[0],
+            100.0 * p.sd[1],
+            100.0 * p.sd[2],
+            100.0 * p.total_sd
+        );
+    }
+    let per_sec = |sd: f64, secs: f64| 1e4 * sd * sd * secs;
+    let _ = writeln!(
+        s,
+        "\nvariance × time (%² s): gather {:.0} per pass, light sets {:.0} per set",
+        per_sec(r.gather.total_sd, r.gather.secs_per_pass),
+        per_sec(r.sets.total_sd, r.set_secs)
+    );
+    match &r.walks {
+        Some((n, w)) => {
+            let _ = writeln!(
+                s,
+                "\nwalks towards the camera from {n} lights: relative variance per walk {:.1} (sd {:.2}); {:.1} % of the walks carried nothing through a collision; the top 1 % carried {:.1} % of the mean",
+                w.relative_variance,
+                w.relative_variance.sqrt(),
+                100.0 * w.zero_fraction,
+                100.0 * w.top_share
+            );
+        }
+        None => {
+            let _ = writeln!(s, "\nwalks: not measured");
+        }
+    }
+    s
+}
+
+/// Runs `lantern noise`.
+pub fn run(args: &NoiseArgs) -> Result<()> {
+    let prepared = load_square(&args.scene, args.size)?;
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    args.internal.apply(&mut settings.internal);
+    settings.internal.validate(&args.scene)?;
+    let report = measure(&prepared, &settings, args)?;
+    let name = args
+        .scene
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let size = (prepared.camera.width, prepared.camera.height);
+    print!("{}", format_report(&name, size, &settings, &report));
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn walk_stats_of_a_known_sample() {
+        // 100 values: 90 zeros, 9 ones, one 91: mean 1, sum 100.
+        let mut v = vec![0.0; 90];
+        v.extend(std::iter::repeat_n(1.0, 9));
+        v.push(91.0);
+        let s = walk_stats(&v).unwrap();
+        assert!((s.zero_fraction - 0.9).abs() < 1e-12);
+        assert!((s.top_share - 0.91).abs() < 1e-12);
+        // E[x²] = (9 + 8281) / 100 = 82.9; Var = 81.9.
+        assert!(
+            (s.relative_variance - 81.9).abs() < 1e-9,
+            "{}",
+            s.relative_variance
+        );
+        assert!(walk_stats(&[0.0, 0.0]).is_none());
+        assert!(walk_stats(&[]).is_none());
+    }
+
+    /// One pass has no variance: a clear error, not a division by zero.
+    #[test]
+    fn one_pass_is_refused() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let args = NoiseArgs {
+            scene: root.join("assets/scenes/thin_sphere.ron"),
+            size: 8,
+            passes: 1,
+            walk_lights: 0,
+            walk_count: 0,
+            internal: InternalArgs::default(),
+        };
+        let err = run(&args).unwrap_err().to_string();
+        assert!(err.contains("--passes"), "{err}");
+    }
+
+    fn thin_sphere(walks: u32, light_samples: u32) -> (NoiseReport, RenderSettings) {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let args = NoiseArgs {
+            scene: root.join("assets/scenes/thin_sphere.ron"),
+            size: 24,
+            passes: 12,
+            walk_lights: 8,
+            walk_count: 200,
+            internal: InternalArgs {
+                lights: Some(1024),
+                walks: Some(walks),
+                light_samples: Some(light_samples),
+                ..Default::default()
+            },
+        };
+        let prepared = load_square(&args.scene, args.size).unwrap();
+        let mut settings = prepared.scene.render.clone();
+        settings.method = Method::Internal;
+        args.internal.apply(&mut settings.internal);
+        (measure(&prepared, &settings, &args).unwrap(), settings)
+    }
+
+    /// The split means what it says: more light samples per pixel lower the
+    /// gather's noise (each part's, the walks untouched), and 16× the walks
+    /// per light lower the light sets' noise of the reconstruction about
+    /// 4× (asserted: at least 2×).
+    #[test]
+    fn the_split_follows_samples_and_walks() {
+        let (one, settings) = thin_sphere(16, 1);
+        let (eight, _) = thin_sphere(16, 8);
+        for c in 0..3 {
+            assert!(
+                eight.gather.sd[c] < 0.6 * one.gather.sd[c],
+                "part {c}: {:?} vs {:?}",
+                eight.gather,
+                one.gather
+            );
+        }
+        let (many, _) = thin_sphere(256, 1);
+        assert!(
+            many.sets.sd[1] < 0.5 * one.sets.sd[1],
+            "{:?} vs {:?}",
+            many.sets,
+            one.sets
+        );
+        let (n, w) = one.walks.unwrap();
+        assert!(
+            n > 0 && w.relative_variance > 0.0 && w.top_share <= 1.0,
+            "{w:?}"
+        );
+        let text = format_report("thin_sphere", (24, 24), &settings, &one);
+        assert!(text.contains("| light sets"), "{text}");
+    }
+}
