@@ -79,6 +79,8 @@ pub struct PartNoise {
     pub total_sd: f64,
     /// Seconds per pass (the gather only).
     pub secs_per_pass: f64,
+    /// The image mean (channels averaged) over the passes.
+    pub image_mean: f64,
 }
 
 /// Distribution of one light's walk values.
@@ -189,6 +191,7 @@ fn part_noise(
         sd: [0, 1, 2].map(rel),
         total_sd: rel(3),
         secs_per_pass: gather_secs / p,
+        image_mean: total_mean,
     })
 }
 
@@ -379,6 +382,11 @@ pub fn format_report(
             100.0 * p.total_sd
         );
     }
+    let _ = writeln!(
+        s,
+        "\nimage mean (channels averaged): {:.6} with one set, {:.6} over the fresh sets",
+        r.gather.image_mean, r.sets.image_mean
+    );
     let per_sec = |sd: f64, secs: f64| 1e4 * sd * sd * secs;
     let _ = writeln!(
         s,

@@ -148,6 +148,90 @@ fn collision_probability(s_star: f32, p: vec3<f32>, d: vec3<f32>) -> f32 {
 // reset at the start of each walk.
 var<private> walk_unscattered: vec3<f32>;
 
+// Probability that a walk's direction after a collision is drawn towards an
+// external light rather than from the phase function, and the
+// Henyey–Greenstein parameter of those lobes (`GUIDE_PROBABILITY`,
+// `GUIDE_G` in src/physics/gated_walk.rs).
+const GUIDE_PROBABILITY: f32 = 0.3;
+const GUIDE_G: f32 = 0.5;
+
+// A walk's next direction and the factor its weight takes.
+struct GuidedDirection {
+    dir: vec3<f32>,
+    factor: f32,
+}
+
+// A backward walk's next direction after a collision at `p`, coming in along
+// `dir` (`guided_direction`): with probability `1 − GUIDE_PROBABILITY` from
+// the phase function, otherwise from a lobe about the direction towards one
+// external light chosen in proportion to its unshadowed irradiance at `p`
+// (largest channel); the factor is the phase function over the mixture's
+// density. `u1, u2` place the direction in its lobe; the choice of lobe
+// draws from `rng`, after them, as the CPU does.
+fn guided_direction(
+    g: f32,
+    p: vec3<f32>,
+    dir: vec3<f32>,
+    u1: f32,
+    u2: f32,
+    rng: ptr<function, Rng>,
+) -> GuidedDirection {
+    let count = light_count();
+    var total = 0.0;
+    for (var i = 0u; i < count; i++) {
+        total += max(max_element(light_at(i, p).irradiance), 0.0);
+    }
+    if !(total > 0.0) || total > 1.0e38 {
+        return GuidedDirection(sample_hg(g, dir, u1, u2), 1.0);
+    }
+    let u = rng_next_f32(rng);
+    var next = sample_hg(g, dir, u1, u2);
+    if u < GUIDE_PROBABILITY {
+        // A light in proportion to its irradiance, then its lobe.
+        var pick = u / GUIDE_PROBABILITY * total;
+        var found = false;
+        var towards = vec3<f32>(0.0);
+        var last = vec3<f32>(0.0);
+        var has_last = false;
+        for (var i = 0u; i < count; i++) {
+            let l = light_at(i, p);
+            let w = max(max_element(l.irradiance), 0.0);
+            if w > 0.0 {
+                last = -l.travel;
+                has_last = true;
+                if !found {
+                    if pick < w {
+                        towards = -l.travel;
+                        found = true;
+                    }
+                    pick -= w;
+                }
+            }
+        }
+        if !found && has_last {
+            towards = last;
+            found = true;
+        }
+        if found {
+            next = sample_hg(GUIDE_G, towards, u1, u2);
+        }
+    }
+    let p_phase = hg(g, dot(dir, next));
+    var p_lobes = 0.0;
+    for (var i = 0u; i < count; i++) {
+        let l = light_at(i, p);
+        let w = max(max_element(l.irradiance), 0.0);
+        if w > 0.0 {
+            p_lobes += w / total * hg(GUIDE_G, dot(next, -l.travel));
+        }
+    }
+    let mixture = (1.0 - GUIDE_PROBABILITY) * p_phase + GUIDE_PROBABILITY * p_lobes;
+    if mixture > 0.0 {
+        return GuidedDirection(next, p_phase / mixture);
+    }
+    return GuidedDirection(next, 0.0);
+}
+
 // One gate of `accumulate_j_from` (its `on_gate` closure): adds
 // `w · α σ_t · ρ · (S₁/b)(z_k, n_k)` to term `k`, with `ρ = ρ(z_k)` for the
 // geometric clock and `ρ(z)` for the optical-depth clock, and to
@@ -274,7 +358,9 @@ fn accumulate_j_from(
             }
             let u1 = rng_next_f32(rng);
             let u2 = rng_next_f32(rng);
-            dir = sample_hg(scene.medium.g, dir, u1, u2);
+            let next_dir = guided_direction(scene.medium.g, origin, dir, u1, u2, rng);
+            dir = next_dir.dir;
+            weight *= next_dir.factor;
         } else {
             if all(weight == vec3<f32>(0.0)) {
                 return;

@@ -266,6 +266,12 @@ mod tests {
                 "COLLISION_DEPTH",
                 gated_walk::COLLISION_DEPTH as f64,
             ),
+            (
+                GATED_WALK,
+                "GUIDE_PROBABILITY",
+                gated_walk::GUIDE_PROBABILITY as f64,
+            ),
+            (GATED_WALK, "GUIDE_G", gated_walk::GUIDE_G as f64),
         ];
         for (part, name, cpu) in pairs {
             let gpu = wgsl_const(part, name);

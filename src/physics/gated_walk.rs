@@ -30,6 +30,17 @@
 //! includes the factor `b(y)`: at a gate in empty space it is zero even
 //! though the walk carries weight there.
 //!
+//! # Guided directions
+//!
+//! The internal lights' walks ([`accumulate_j_from`]) draw their direction
+//! after a collision from a mixture: the phase function, or with
+//! probability [`GUIDE_PROBABILITY`] a lobe about the direction towards an
+//! external light, and multiply the weight by the phase function over the
+//! mixture's density ([`guided_direction`]). The expectation above is
+//! unchanged (importance sampling of the collision's direction integral);
+//! what changes is which walks carry the light: unguided, the few that
+//! wander to the lit side carry most of it.
+//!
 //! # The optical-depth clock
 //!
 //! METHOD.md §7 also allows the clock `dτ = c dℓ`. With RGB extinction one
@@ -383,6 +394,7 @@ pub fn gated_walk<D: DensityField>(
         z,
         n,
         settings,
+        None,
         rng,
         |k, w, p, dir, _, _| on_gate(k, w, p, dir),
         None,
@@ -414,7 +426,9 @@ pub fn accumulate_j<D: DensityField>(
 /// carried to its gate without a real collision: the single scatter
 /// `T S₁` from `k s*` further along `−n`, which the final gather marches
 /// exactly (the single scatter beyond the window) instead of reading it
-/// back from the lights' spherical harmonics.
+/// back from the lights' spherical harmonics. The walk's directions after
+/// collisions are guided towards the external lights
+/// ([`guided_direction`]).
 #[allow(clippy::too_many_arguments)] // accumulate_j's, `first` and one more output
 pub fn accumulate_j_from<D: DensityField>(
     vol: &Volume<D>,
@@ -423,6 +437,35 @@ pub fn accumulate_j_from<D: DensityField>(
     n: Vec3,
     settings: &GateSettings,
     first: u32,
+    rng: &mut Rng,
+    out: &mut [Vec3],
+    unscattered: Option<&mut [Vec3]>,
+) {
+    accumulate_j_guided(
+        vol,
+        lights,
+        z,
+        n,
+        settings,
+        first,
+        true,
+        rng,
+        out,
+        unscattered,
+    );
+}
+
+/// [`accumulate_j_from`], with the directions after collisions guided
+/// towards the lights or (`guided` false) from the phase function alone.
+#[allow(clippy::too_many_arguments)] // accumulate_j_from's and the switch
+pub fn accumulate_j_guided<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    first: u32,
+    guided: bool,
     rng: &mut Rng,
     out: &mut [Vec3],
     mut unscattered: Option<&mut [Vec3]>,
@@ -449,6 +492,7 @@ pub fn accumulate_j_from<D: DensityField>(
         z,
         n,
         &limited,
+        guided.then_some(lights),
         rng,
         |k, w, zk, nk, scattered, rng| {
             let rho = match settings.clock {
@@ -692,17 +736,101 @@ fn optical_depth_flight<D: DensityField>(
     }
 }
 
-/// The walk itself. `on_gate(k, weight, z_k, n_k, scattered, rng)` also
+/// Probability that a walk's direction after a collision is drawn towards
+/// an external light ([`guided_direction`]) rather than from the phase
+/// function. The walks' values are heavy-tailed: on the puffs two thirds
+/// of the walks from a light carry nothing through a collision and the
+/// top 1 % carry half the mean (the few that reach the sunlit side;
+/// `lantern noise`). At 0.3, with lobes of `g` [`GUIDE_G`], the light sets'
+/// noise fell from 42.7 % to 35.7 % of the image mean per set (96², M 16384,
+/// K 16, SH 4, 24 sets; 1.43× less variance); 0.2 gave about the same,
+/// a narrower lobe (`g` 0.8) and an isotropic one less.
+pub const GUIDE_PROBABILITY: f32 = 0.3;
+
+/// The Henyey–Greenstein parameter of the lobes about the directions
+/// towards the external lights that [`guided_direction`] mixes in.
+pub const GUIDE_G: f32 = 0.5;
+
+/// A backward walk's next direction after a collision at `p`, coming in
+/// along `dir`, and the factor its weight takes: with probability
+/// `1 − q` (`q` = [`GUIDE_PROBABILITY`]) from the phase function about
+/// `dir`, otherwise from a Henyey–Greenstein lobe ([`GUIDE_G`]) about the
+/// direction towards one external light, chosen in proportion to its
+/// unshadowed irradiance at `p` (largest channel). The factor is the
+/// phase function over the mixture's density, at most `1/(1 − q)`, so the
+/// walk stays unbiased for any lights and any medium; with no light
+/// reaching `p` it is the phase function alone. `u1, u2` place the
+/// direction within the chosen lobe; the choice of lobe draws from `rng`.
+pub fn guided_direction(
+    g: f32,
+    lights: &Lights,
+    p: Vec3,
+    dir: Vec3,
+    u1: f32,
+    u2: f32,
+    rng: &mut Rng,
+) -> (Vec3, f32) {
+    let mut total = 0.0f32;
+    lights.for_each_at(p, |l| total += l.irradiance.max_element().max(0.0));
+    if !(total > 0.0 && total.is_finite()) {
+        return (phase::sample_hg(g, dir, u1, u2), 1.0);
+    }
+    let u = rng.next_f32();
+    let next = if u < GUIDE_PROBABILITY {
+        // A light in proportion to its irradiance, then its lobe.
+        let mut pick = u / GUIDE_PROBABILITY * total;
+        let mut towards = None;
+        let mut last = None;
+        lights.for_each_at(p, |l| {
+            let w = l.irradiance.max_element().max(0.0);
+            if w > 0.0 {
+                last = Some(-l.travel);
+                if towards.is_none() {
+                    if pick < w {
+                        towards = Some(-l.travel);
+                    }
+                    pick -= w;
+                }
+            }
+        });
+        match towards.or(last) {
+            Some(t) => phase::sample_hg(GUIDE_G, t, u1, u2),
+            None => phase::sample_hg(g, dir, u1, u2),
+        }
+    } else {
+        phase::sample_hg(g, dir, u1, u2)
+    };
+    let p_phase = phase::hg(g, dir.dot(next));
+    let mut p_lobes = 0.0f32;
+    lights.for_each_at(p, |l| {
+        let w = l.irradiance.max_element().max(0.0);
+        if w > 0.0 {
+            p_lobes += w / total * phase::hg(GUIDE_G, next.dot(-l.travel));
+        }
+    });
+    let mixture = (1.0 - GUIDE_PROBABILITY) * p_phase + GUIDE_PROBABILITY * p_lobes;
+    if mixture > 0.0 {
+        (next, p_phase / mixture)
+    } else {
+        (next, 0.0)
+    }
+}
+
+/// The walk itself; with `guide`, its directions after a collision come
+/// from [`guided_direction`] towards those lights. `on_gate(k, weight, z_k,
+/// n_k, scattered, rng)` also
 /// learns whether the walk has collided yet and receives the random stream,
 /// so that the caller can trace shadow rays; `on_collision(clock)`, if
 /// given, is called at every real collision with the clock's value there (a
 /// hook for tests: it makes the optical-depth clock resolve at every
 /// collision).
+#[allow(clippy::too_many_arguments)] // the start, the gates, the guide, the stream and two callbacks
 fn walk<D: DensityField>(
     vol: &Volume<D>,
     z: Vec3,
     n: Vec3,
     settings: &GateSettings,
+    guide: Option<&Lights>,
     rng: &mut Rng,
     mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, bool, &mut Rng),
     mut on_collision: Option<&mut dyn FnMut(f32)>,
@@ -796,7 +924,16 @@ fn walk<D: DensityField>(
                     }
                     weight /= q;
                 }
-                dir = phase::sample_hg(vol.optics.g, dir, rng.next_f32(), rng.next_f32());
+                let (u1, u2) = (rng.next_f32(), rng.next_f32());
+                dir = match guide {
+                    Some(lights) => {
+                        let (d, factor) =
+                            guided_direction(vol.optics.g, lights, origin, dir, u1, u2, rng);
+                        weight *= factor;
+                        d
+                    }
+                    None => phase::sample_hg(vol.optics.g, dir, u1, u2),
+                };
             }
             Flight::Exit => return,
             Flight::Gate(t) => {
@@ -886,6 +1023,7 @@ mod tests {
                 Vec3::ZERO,
                 Vec3::Z,
                 settings,
+                None,
                 &mut rng,
                 |_, _, _, _, _, _| {},
                 Some(&mut |clock: f32| {
@@ -930,6 +1068,81 @@ mod tests {
             bins += 1;
         }
         (chi2, bins - 1)
+    }
+
+    /// Guiding the walks towards the light changes their spread, not their
+    /// mean: in a bounded, forward-scattering, heterogeneous medium lit by
+    /// a sun and a point light, the collided part of every term agrees
+    /// with the unguided walk's (summed over `k ≥ 1`, per channel, within
+    /// 4.5 standard errors of the difference), and the guided walks' values
+    /// are less spread (their standard error lower).
+    #[test]
+    fn guided_walks_keep_the_mean() {
+        let mut vol = boxed(1.2, 0.8, 0.95, 1.0, 4);
+        vol.optics.g = 0.6;
+        let lights = Lights {
+            suns: vec![crate::physics::lights::Sun {
+                direction: Vec3::new(0.6, -1.0, -0.5).normalize(),
+                irradiance: Vec3::new(3.0, 2.0, 1.0),
+            }],
+            points: vec![crate::physics::lights::PointLight {
+                position: Vec3::new(-2.0, 0.5, 1.5),
+                intensity: Vec3::splat(4.0),
+            }],
+        };
+        let settings = GateSettings {
+            s_star: 0.5,
+            n_terms: 40,
+            clock: Clock::OpticalDepth,
+            rr_start: crate::physics::reference::RR_START_DEPTH,
+        };
+        let z = Vec3::new(0.1, -0.4, 0.2);
+        let n = Vec3::new(0.3, 0.2, -1.0).normalize();
+        let walks = 400_000u32;
+        let mut stats = Vec::new();
+        for guided in [false, true] {
+            let (mut sum, mut sum2) = (Vec3::ZERO, Vec3::ZERO);
+            for w in 0..walks {
+                let mut rng = Rng::for_sample(21, w, u32::from(guided));
+                let mut out = vec![Vec3::ZERO; settings.gate_count()];
+                let mut unscattered = vec![Vec3::ZERO; settings.gate_count()];
+                accumulate_j_guided(
+                    &vol,
+                    &lights,
+                    z,
+                    n,
+                    &settings,
+                    1,
+                    guided,
+                    &mut rng,
+                    &mut out,
+                    Some(&mut unscattered),
+                );
+                let v = out[1..].iter().sum::<Vec3>() - unscattered[1..].iter().sum::<Vec3>();
+                sum += v;
+                sum2 += v * v;
+            }
+            let mean = sum / walks as f32;
+            let var = (sum2 / walks as f32 - mean * mean).max(Vec3::ZERO);
+            stats.push((mean, var / walks as f32));
+        }
+        let ((m0, v0), (m1, v1)) = (stats[0], stats[1]);
+        for c in 0..3 {
+            let se = (v0[c] + v1[c]).sqrt();
+            assert!(
+                (m0[c] - m1[c]).abs() < 4.5 * se,
+                "channel {c}: unguided {} guided {} (se {se})",
+                m0[c],
+                m1[c]
+            );
+            assert!(m0[c] > 10.0 * se, "channel {c}: too noisy to compare");
+        }
+        eprintln!(
+            "unguided {m0} ± {}, guided {m1} ± {}",
+            v0.x.sqrt(),
+            v1.x.sqrt()
+        );
+        assert!(v1.x < v0.x, "guided variance {} against {}", v1.x, v0.x);
     }
 
     #[test]
@@ -1002,6 +1215,7 @@ mod tests {
                         Vec3::new(0.3, -0.2, 0.1),
                         Vec3::Z,
                         &settings,
+                        None,
                         &mut rng,
                         |k, _, p, _, scattered, _| out.push((k, p, scattered)),
                         resolve_each.then_some(&mut hook as &mut dyn FnMut(f32)),
