@@ -15,13 +15,14 @@ pub enum GpuError {
     /// No adapter (GPU or software rasteriser) is available.
     #[error("no GPU adapter available ({0}); install a Vulkan driver (e.g. Mesa's lavapipe, package mesa-vulkan-drivers) or use the CPU backend")]
     NoAdapter(String),
-    /// The adapter refused to create a device.
-    #[error("cannot create a GPU device on {adapter}: {source}")]
+    /// The adapter refused to create a device (the reason is in the
+    /// message, not also the error's source, so a full chain says it once).
+    #[error("cannot create a GPU device on {adapter}: {reason}")]
     Device {
         /// The adapter's name.
         adapter: String,
         /// wgpu's reason.
-        source: wgpu::RequestDeviceError,
+        reason: wgpu::RequestDeviceError,
     },
     /// A buffer is larger than a device limit allows.
     #[error("the {what} needs {bytes} bytes, more than this device's {limit} ({max} bytes); use a smaller volume or image, or the CPU backend")]
@@ -128,9 +129,9 @@ impl GpuContext {
                 ..Default::default()
             })
             .await
-            .map_err(|source| GpuError::Device {
+            .map_err(|reason| GpuError::Device {
                 adapter: adapter_info.name.clone(),
-                source,
+                reason,
             })?;
         Ok(Self::wrap(device, queue, adapter_info, limits))
     }

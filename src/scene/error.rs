@@ -9,13 +9,16 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     /// The file could not be read at all (missing, unreadable).
-    #[error("cannot read {path}: {source}")]
+    ///
+    /// The reason is part of the message and not also exposed as the error's
+    /// source, so that a chain printed in full (`{:#}` through `anyhow`)
+    /// says it once.
+    #[error("cannot read {path}: {reason}")]
     Io {
         /// The file that could not be read.
         path: PathBuf,
         /// The operating system's reason.
-        #[source]
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     /// The scene file is not valid RON for a Lantern scene (syntax, unknown
     /// or missing field, wrong type).
@@ -71,5 +74,28 @@ impl SceneError {
             path: path.into(),
             reason: reason.into(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A missing file's error, printed as the command line prints it (the
+    /// whole `anyhow` chain), names the file and gives the reason once.
+    #[test]
+    fn io_error_says_its_reason_once() {
+        let reason = std::fs::read("/nonexistent/lantern/scene.ron").unwrap_err();
+        let text = reason.to_string();
+        let err = anyhow::Error::from(SceneError::Io {
+            path: PathBuf::from("/nonexistent/lantern/scene.ron"),
+            reason,
+        });
+        let printed = format!("{err:#}");
+        assert!(
+            printed.contains("/nonexistent/lantern/scene.ron"),
+            "{printed}"
+        );
+        assert_eq!(printed.matches(&text).count(), 1, "{printed}");
     }
 }

@@ -151,9 +151,9 @@ impl Scene {
     /// Reads and validates a scene file. Grids are not loaded yet: see
     /// [`Scene::load_density`].
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        let text = std::fs::read_to_string(path).map_err(|reason| SceneError::Io {
             path: path.to_owned(),
-            source,
+            reason,
         })?;
         Self::from_ron(&text, path)
     }

@@ -129,10 +129,10 @@ fn format_name(format: GridFormat) -> &'static str {
 // Shared helpers.
 
 /// Maps an I/O failure on `path` to [`SceneError::Io`].
-fn io_error(path: &Path, source: std::io::Error) -> SceneError {
+fn io_error(path: &Path, reason: std::io::Error) -> SceneError {
     SceneError::Io {
         path: path.to_owned(),
-        source,
+        reason,
     }
 }
 
