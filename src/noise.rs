@@ -35,6 +35,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::cli::InternalArgs;
+use crate::cpu::pixel_ray;
 use crate::physics::gated_walk::{accumulate_j_from, GateSettings};
 use crate::physics::gather::{gather, GatherSample};
 use crate::physics::internal::InternalLights;
@@ -146,9 +147,7 @@ fn part_noise(
             .into_par_iter()
             .map(|idx| {
                 let (x, y) = (idx as u32 % cam.width, idx as u32 / cam.width);
-                let mut rng = Rng::for_sample(settings.seed, idx as u32, stream);
-                let (jx, jy) = (rng.next_f32(), rng.next_f32());
-                let dir = cam.ray_dir(x as f32 + jx, y as f32 + jy);
+                let (dir, mut rng) = pixel_ray(&cam, settings.seed, x, y, stream);
                 gather(
                     &prepared.volume,
                     &prepared.lights,

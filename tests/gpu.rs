@@ -469,7 +469,7 @@ fn gather_agrees_thin_sphere_point_lights() {
 //   within the spread of image means between light sets.
 
 use lantern::gpu::walks::{build_internal_lights_gpu, place_lights_gpu};
-use lantern::physics::gated_walk::{accumulate_j_from, collision_probability, GateSettings};
+use lantern::physics::gated_walk::{accumulate_j_from, collided_per_unit_chance, GateSettings};
 use lantern::physics::internal::{InternalParams, PLACEMENT_RESOLUTION};
 use lantern::physics::placement::PlacementDensity;
 use lantern::physics::reference::RR_START_DEPTH;
@@ -700,10 +700,14 @@ fn cpu_walks(
         out.f.add(per_walk.get(1).copied().unwrap_or(Vec3::ZERO));
         out.multi.add(total);
         // Per unit chance of the collision, as the lights store it.
-        out.scattered.add(
-            (total - unscattered[1..].iter().sum::<Vec3>())
-                / collision_probability(vol, params.s_star, x, -n),
-        );
+        out.scattered.add(collided_per_unit_chance(
+            vol,
+            params.s_star,
+            x,
+            n,
+            &per_walk,
+            &unscattered,
+        ));
         sh_basis(1, n, &mut y);
         for c in 0..3 {
             out.sh1[c].add(total * y[c + 1] * four_pi);

@@ -19,7 +19,7 @@ use crate::physics::internal::InternalLights;
 use crate::physics::reference::radiance_split;
 use crate::physics::rng::Rng;
 use crate::render::{internal_params, internal_params_for_set, light_set, Film, Prepared};
-use crate::scene::{Method, RenderSettings};
+use crate::scene::{CameraFrame, Method, RenderSettings};
 
 /// One pass (one sample per pixel), by part. Rows top to bottom.
 #[derive(Clone, Debug, Default)]
@@ -173,10 +173,7 @@ impl Renderer {
                     return;
                 }
                 for x in 0..width {
-                    let index = (y * width + x) as u32;
-                    let mut rng = Rng::for_sample(seed, index, pass);
-                    let (jx, jy) = (rng.next_f32(), rng.next_f32());
-                    let dir = cam.ray_dir(x as f32 + jx, y as f32 + jy);
+                    let (dir, mut rng) = pixel_ray(cam, seed, x as u32, y as u32, pass);
                     let (t, s) = self.sample(lights, dir, &mut rng);
                     row[x] = t;
                     row_single[x] = s;
@@ -206,6 +203,16 @@ impl Renderer {
             }
         }
     }
+}
+
+/// The camera ray of pixel `(x, y)` in pass `pass`: its direction through a
+/// jittered point of the pixel, and the pixel's random stream (depending
+/// only on seed, pixel and pass) after the jitter, for the estimate.
+#[inline]
+pub fn pixel_ray(cam: &CameraFrame, seed: u64, x: u32, y: u32, pass: u32) -> (Vec3, Rng) {
+    let mut rng = Rng::for_sample(seed, y * cam.width + x, pass);
+    let (jx, jy) = (rng.next_f32(), rng.next_f32());
+    (cam.ray_dir(x as f32 + jx, y as f32 + jy), rng)
 }
 
 /// Renders `spp` passes into a new film, calling `on_pass` after each; it

@@ -9,7 +9,8 @@
 //! times the part of `J` that `L₀` reconstructs (what the walks carried
 //! through a collision, times the chance of one from the point) and its
 //! single-scatter term `V_i b P T J / (r² + h²)`, with the light-side
-//! transmittance from a coarser quadrature ([`SHADOW_STEPS`] points). Luminance-like sums of the RGB parts are normalised to shares.
+//! transmittance from a coarser quadrature ([`SHADOW_STEPS`] points).
+//! Luminance-like sums of the RGB parts are normalised to shares.
 //! `L₁`'s part is attributed by the note's point-light form for both
 //! [`crate::physics::internal::L1Form`]s: the field form spreads each
 //! light's `J` over its kernel, which changes the shares of neighbouring

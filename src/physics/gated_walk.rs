@@ -296,6 +296,27 @@ pub fn collision_probability<D: DensityField>(
     (-(-tau).exp_m1()).max(COLLISION_FLOOR)
 }
 
+/// What one walk from `x` with start direction `−n` carried to its gates
+/// `k ≥ 1` through a collision, `Σ (out_k − unscattered_k)`, per unit
+/// chance of that collision ([`collision_probability`] along `−n`; no
+/// march when it carried nothing): the walk's share of what the lights
+/// store as [`super::internal::Part::Scattered`].
+pub fn collided_per_unit_chance<D: DensityField>(
+    vol: &Volume<D>,
+    s_star: f32,
+    x: Vec3,
+    n: Vec3,
+    out: &[Vec3],
+    unscattered: &[Vec3],
+) -> Vec3 {
+    let total: Vec3 = out.iter().skip(1).sum();
+    let collided = total - unscattered.iter().skip(1).sum::<Vec3>();
+    if collided == Vec3::ZERO {
+        return collided;
+    }
+    collided / collision_probability(vol, s_star, x, -n)
+}
+
 /// The optical depth past which [`collision_probability`] stops marching
 /// and returns one (`1 − e^{−12}` differs from it by 6e-6; mirrored in
 /// `shaders/common/gated_walk.wgsl`).

@@ -46,7 +46,9 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::gated_walk::{accumulate_j_from, collision_probability, Clock, GateSettings};
+use super::gated_walk::{
+    accumulate_j_from, collided_per_unit_chance, collision_probability, Clock, GateSettings,
+};
 use super::light_index::LightGrid;
 use super::lights::Lights;
 use super::phase;
@@ -444,12 +446,8 @@ impl InternalLights {
                     if total == Vec3::ZERO {
                         continue;
                     }
-                    // Per unit chance of the collision (see `Part::Scattered`;
-                    // a walk that carried nothing through one needs no march).
-                    let mut after_collision = total - unscattered[1..].iter().sum::<Vec3>();
-                    if after_collision != Vec3::ZERO {
-                        after_collision /= collision_probability(vol, params.s_star, x, -n);
-                    }
+                    let after_collision =
+                        collided_per_unit_chance(vol, params.s_star, x, n, &per_walk, &unscattered);
                     let first = per_walk.get(1).copied().unwrap_or(Vec3::ZERO);
                     sh_basis(order, n, &mut y);
                     for c in 0..count {
