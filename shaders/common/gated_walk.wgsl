@@ -143,6 +143,51 @@ fn collision_probability(s_star: f32, p: vec3<f32>, d: vec3<f32>) -> f32 {
     return max(1.0 - exp(-m.value), COLLISION_FLOOR);
 }
 
+// `collision_probability` at points of one ray asked for from its far end
+// back (`ChancesAlongRay`): the nearest point asked for so far and its
+// optical depth to the exit (`known_t` negative: none yet), and whether that
+// depth reached `COLLISION_DEPTH`.
+struct ChancesAlongRay {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    t_exit: f32,
+    s_star: f32,
+    known_t: f32,
+    known_tau: f32,
+    saturated: bool,
+}
+
+fn chances_along_ray(origin: vec3<f32>, dir: vec3<f32>, t_exit: f32, s_star: f32) -> ChancesAlongRay {
+    return ChancesAlongRay(origin, dir, t_exit, s_star, -1.0, 0.0, false);
+}
+
+// The chance at `origin + t dir` of a collision along `dir` before the
+// exit: one march to `COLLISION_DEPTH` for the first point, then the
+// stretch from each point to the one asked for before it.
+fn chance_at(c: ptr<function, ChancesAlongRay>, t_in: f32) -> f32 {
+    if (*c).saturated {
+        return 1.0;
+    }
+    var t = min(t_in, (*c).t_exit);
+    var t_stop = (*c).t_exit;
+    var budget = COLLISION_DEPTH;
+    if (*c).known_t >= 0.0 {
+        t = min(t, (*c).known_t);
+        t_stop = (*c).known_t;
+        budget = COLLISION_DEPTH - (*c).known_tau;
+    }
+    let m = march_clock(
+        CLOCK_OPTICAL_DEPTH, (*c).s_star, (*c).origin, (*c).dir, t, (*c).t_exit, t_stop, budget,
+    );
+    if m.reached {
+        (*c).saturated = true;
+        return 1.0;
+    }
+    (*c).known_tau += m.value;
+    (*c).known_t = t;
+    return max(1.0 - exp(-(*c).known_tau), COLLISION_FLOOR);
+}
+
 // The sum over gates of what `accumulate_j_from` added before the walk's
 // first collision (`accumulate_j_split`'s `unscattered`, summed over k):
 // reset at the start of each walk.

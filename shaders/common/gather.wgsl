@@ -12,8 +12,8 @@
 // - `reconstructed`: the rest of the k ≥ 1 part of L₀, `∫ T Ĵ dt` with `Ĵ`
 //   the kernel reconstruction of what the walks carried through a
 //   collision (`reconstruct_multi` at `scattered_offset`, per unit chance
-//   of the collision, times `collision_probability` at `y`:
-//   `reconstruct_collided`).
+//   of the collision, times `collision_probability` at `y`, the window's
+//   points sharing one march: `chance_at`).
 // - `internal`: L₁, in the form `gather_params.l1_form` says:
 //   - field (`L1_FIELD`, default): at each point `y`, one scattering of
 //     the reconstructed field `J = S₁ + Ĵ` at `x' = y − r n'`, `n'` drawn
@@ -210,8 +210,12 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     let samples = max(samples_in, 1u);
     // L₀ (both parts) and, for the field form, L₁: stratified points of
     // the window, ratio-tracked transmittance from `x`.
+    // The strata from the window's far end back, so that the collided
+    // part's chances share one march (`ChancesAlongRay`).
     var points = points_along(clock, x, dir, 0.0, window);
-    for (var j = 0u; j < samples; j++) {
+    var chances = chances_along_ray(x, dir, len, s_star);
+    for (var jj = 0u; jj < samples; jj++) {
+        let j = samples - 1u - jj;
         let ts = segment_sample(&points, (f32(j) + rng_next_f32(rng)) / f32(samples));
         let t = ts.x;
         let step = ts.y / f32(samples);
@@ -220,7 +224,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         // The collided part is stored per unit chance of the collision.
         var j_hat = reconstruct_multi(y, n, rho, gather_params.scattered_offset);
         if any(j_hat != vec3<f32>(0.0)) {
-            j_hat *= collision_probability(gather_params.s_star, y, dir);
+            j_hat *= chance_at(&chances, t);
         }
         var s1 = vec3<f32>(0.0);
         var l1 = vec3<f32>(0.0);

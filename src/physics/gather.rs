@@ -23,9 +23,10 @@
 //!   over the window these add up to that march).
 //! - **reconstructed**: the rest of the `k ≥ 1` part of `L₀`, `∫ T Ĵ dt`
 //!   with `Ĵ` the kernel reconstruction
-//!   ([`InternalLights::reconstruct_collided`]) of what the walks carried
+//!   ([`InternalLights::reconstruct_multi`]) of what the walks carried
 //!   through a collision ([`Part::Scattered`]: per unit chance of that
-//!   collision, times the chance at `y`).
+//!   collision, times the chance at `y`; the window's points share one
+//!   march for their chances, [`super::gated_walk::ChancesAlongRay`]).
 //! - **internal**: `L₁`, one scattering inside the window of light that
 //!   left a source `J` earlier in the window (clock from `x` to `y` plus
 //!   clock from `y` to the source at most `s*`), in one of two forms
@@ -57,7 +58,7 @@
 
 use glam::Vec3;
 
-use super::gated_walk::{march_clock, Clock, ClockMarch};
+use super::gated_walk::{march_clock, ChancesAlongRay, Clock, ClockMarch};
 use super::internal::{InternalLights, L1Form, Part};
 use super::lights::Lights;
 use super::phase;
@@ -256,13 +257,20 @@ pub fn gather<D: DensityField>(
     let samples = samples.max(1);
     // L₀ (both parts) and, for the field form, L₁: stratified points of
     // the window, ratio-tracked transmittance from `x`.
+    // The strata are visited from the window's far end back, so that the
+    // collided part's chances of a collision share one march
+    // ([`ChancesAlongRay`]).
     let points = points_along(vol, clock, x, dir, 0.0, window);
-    for j in 0..samples {
+    let mut chances = ChancesAlongRay::new(x, dir, len, s_star);
+    for j in (0..samples).rev() {
         let (t, inv_pdf) = points.sample((j as f32 + rng.next_f32()) / samples as f32);
         let step = inv_pdf / samples as f32;
         let y = x + dir * t;
         let rho = vol.density.density(y);
-        let j_hat = cache.reconstruct_collided(vol, y, n, rho);
+        let mut j_hat = cache.reconstruct_multi(y, n, rho, Part::Scattered);
+        if j_hat != Vec3::ZERO {
+            j_hat *= chances.at(vol, t);
+        }
         let (s1, l1) = if rho > 0.0 {
             let s1 = cache.scatter
                 * rho

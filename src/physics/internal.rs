@@ -46,9 +46,7 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::gated_walk::{
-    accumulate_j_from, collided_per_unit_chance, collision_probability, Clock, GateSettings,
-};
+use super::gated_walk::{accumulate_j_from, collided_per_unit_chance, Clock, GateSettings};
 use super::light_index::LightGrid;
 use super::lights::Lights;
 use super::phase;
@@ -139,10 +137,12 @@ pub enum Part {
     /// `k ≥ 1` part, whose unscattered rest (single scatter from `k s*`
     /// further along the ray) the gather marches exactly. Stored and
     /// reconstructed **per unit chance of that collision**,
-    /// [`collision_probability`] along `−n`: the walks divide by it at the
-    /// light, and [`InternalLights::reconstruct_collided`] multiplies by it
-    /// at the point. Near the surface of a puff that chance drops from
-    /// nearly one to nothing across the directions that leave the medium;
+    /// [`super::gated_walk::collision_probability`] along `−n`: the walks
+    /// divide by it at the light, and the gather multiplies the
+    /// reconstruction by it at the point
+    /// ([`super::gated_walk::ChancesAlongRay`]). Near the surface of a
+    /// puff that chance drops from nearly one to nothing across the
+    /// directions that leave the medium;
     /// projected as it was, order-4 harmonics and a kernel that reaches
     /// lights deeper in smeared that horizon, and the dim edges of the
     /// puffs came out 7…20 % bright at small `s*` (README, "What the
@@ -768,23 +768,6 @@ impl InternalLights {
         } else {
             (num * (scale_p / den)).max(Vec3::ZERO)
         }
-    }
-
-    /// The collided part of `Σ_{k≥1} J_k` at `p` towards `n` (what `L₀`
-    /// reconstructs): the kernel reconstruction of [`Part::Scattered`]
-    /// times the chance of a collision along `−n` from `p`.
-    pub fn reconstruct_collided<D: DensityField>(
-        &self,
-        vol: &Volume<D>,
-        p: Vec3,
-        n: Vec3,
-        density_at_p: f32,
-    ) -> Vec3 {
-        let j = self.reconstruct_multi(p, n, density_at_p, Part::Scattered);
-        if j == Vec3::ZERO {
-            return j;
-        }
-        j * collision_probability(vol, self.s_star, p, -n)
     }
 
     /// The factor that turns the kernel average back into `Ĵ` at a point of
