@@ -747,23 +747,41 @@ impl InternalLights {
             Part::All => &self.multi_coeffs,
             Part::Scattered => &self.scattered_coeffs,
         };
-        let mut y = [0.0f32; MAX_COUNT];
-        sh_basis(self.sh_order, n, &mut y);
-        let mut num = Vec3::ZERO;
-        let mut den = 0.0f32;
         // The lights' SH series are summed unclamped and the average is
         // clamped: clamping each light's noisy series at zero would bias
         // the average upwards wherever `J` is small (measured on the
         // forward-scattering puffs at K = 128: +6.8 % clamped per light,
-        // +4.5 % clamped after the sum).
+        // +4.5 % clamped after the sum). The series is linear in the
+        // coefficients, so the kernel sums them (a contiguous
+        // multiply-add the compiler vectorises) and evaluates the sum
+        // once: on the puffs at 256² (M 16384, SH order 4) this function
+        // took 31 % of a pass evaluating every light's series, and the
+        // pass 4 % less time after (what is left is mostly loading the
+        // lights' coefficients).
+        let width = 3 * self.sh_count;
+        let flat: &[f32] = bytemuck::cast_slice(coeffs);
+        let mut sum = [0.0f32; 3 * MAX_COUNT];
+        let sum = &mut sum[..width];
+        let mut den = 0.0f32;
         self.for_each_kernel_weight(p, |i, k| {
-            let c = &coeffs[i * self.sh_count..(i + 1) * self.sh_count];
-            num += Self::eval_sh(c, &y) * (k * self.recon_scale[i]);
+            let w = k * self.recon_scale[i];
+            for (s, &c) in sum.iter_mut().zip(&flat[i * width..(i + 1) * width]) {
+                *s += w * c;
+            }
             den += k;
         });
         if den <= 0.0 {
-            Vec3::ZERO
-        } else if self.params.renewed {
+            return Vec3::ZERO;
+        }
+        let mut y = [0.0f32; MAX_COUNT];
+        sh_basis(self.sh_order, n, &mut y);
+        let num = sum
+            .chunks_exact(3)
+            .zip(&y)
+            .fold(Vec3::ZERO, |acc, (c, &yi)| {
+                acc + Vec3::new(c[0], c[1], c[2]) * yi
+            });
+        if self.params.renewed {
             num * (scale_p / den)
         } else {
             (num * (scale_p / den)).max(Vec3::ZERO)
