@@ -541,6 +541,76 @@ mod tests {
         )
     }
 
+    /// The kernel reconstruction (which reads copies of the lights in the
+    /// fine grid's order and sums their coefficients before evaluating
+    /// the series) is the normalised kernel average of METHOD.md §6
+    /// computed light by light over all lights, for both parts, both
+    /// clocks (the optical-depth one averages `J_i / c_g(x_i)` and
+    /// multiplies by `c_g(p)`) and SH order 4, up to rounding.
+    #[test]
+    fn reconstruction_is_the_kernel_average_over_all_lights() {
+        use crate::physics::sh::sh_basis;
+        let vol = cube(2.0, 0.9, 0.5);
+        let mut rng = Rng::for_sample(11, 0, 0);
+        let mut lights = Vec::new();
+        for _ in 0..400 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
+            lights.push(InternalLight {
+                position: p,
+                density: 0.5 + rng.next_f32(),
+                weight: 8.0 / 400.0,
+            });
+        }
+        let count = sh_count(4);
+        let mut coeffs = || -> Vec<Vec3> {
+            (0..lights.len() * count)
+                .map(|_| Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.3)
+                .collect()
+        };
+        let (multi, scattered) = (coeffs(), coeffs());
+        for clock in [Clock::Geometric, Clock::OpticalDepth] {
+            let mut params = sh1_params(clock, 0.5, 4, 0.35, L1Form::Field);
+            params.sh_order = 4;
+            params.renewed = true;
+            let cache = assemble(&vol, &params, &lights, multi.clone(), scattered.clone());
+            let h = cache.kernel_radius;
+            for q in 0..200 {
+                let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.2 - 1.1;
+                let n = phase::sample_hg(0.0, Vec3::Z, rng.next_f32(), rng.next_f32());
+                let rho = if q % 7 == 0 { 0.0 } else { 0.8 };
+                let mut y = [0.0f32; crate::physics::sh::MAX_COUNT];
+                sh_basis(4, n, &mut y);
+                for (part, table) in [(Part::All, &multi), (Part::Scattered, &scattered)] {
+                    let (mut num, mut den) = (Vec3::ZERO, 0.0f32);
+                    for (i, l) in lights.iter().enumerate() {
+                        let r2 = (l.position - p).length_squared() / (h * h);
+                        if r2 >= 1.0 {
+                            continue;
+                        }
+                        let k = (1.0 - r2) * (1.0 - r2);
+                        let scale = match clock {
+                            Clock::Geometric => 1.0,
+                            Clock::OpticalDepth => 1.0 / (2.0 * l.density),
+                        };
+                        let j: Vec3 = (0..count).map(|c| table[i * count + c] * y[c]).sum();
+                        num += j * (k * scale);
+                        den += k;
+                    }
+                    let scale_p = match clock {
+                        Clock::Geometric => 1.0,
+                        Clock::OpticalDepth => 2.0 * rho,
+                    };
+                    let want = if den > 0.0 { num * (scale_p / den) } else { Vec3::ZERO };
+                    let got = cache.reconstruct_multi(p, n, rho, part);
+                    assert!(
+                        (got - want).abs().max_element() <= 1e-4 * (1.0 + want.abs().max_element()),
+                        "{clock:?} {part:?} at {p}: {got} against {want}"
+                    );
+                }
+            }
+        }
+    }
+
     /// The homogeneous cube with grey `σ_t`, albedo and `g`.
     fn cube(sigma: f32, albedo: f32, g: f32) -> Volume<Cube> {
         Volume::new(

@@ -216,6 +216,14 @@ pub struct InternalLights {
     pub(crate) recon_scale: Vec<f32>,
     /// Lights near a point, cells of about `h`.
     pub(crate) fine: LightGrid,
+    /// Aligned with `fine.ids()` (the lights cell by cell): position and
+    /// `recon_scale`, then `sh_count` coefficients each of
+    /// `multi_coeffs` and `scattered_coeffs`. Copies in the order the
+    /// kernel reconstruction visits the lights, so that it reads them
+    /// from contiguous memory rather than all over the light arrays.
+    fine_points: Vec<[f32; 4]>,
+    fine_multi: Vec<Vec3>,
+    fine_scattered: Vec<Vec3>,
     /// Light clusters for the gather's light selection.
     pub(crate) clusters: LightGrid,
     /// Per cluster: `Σ` power of its lights.
@@ -545,6 +553,25 @@ impl InternalLights {
             kernel_radius,
             96,
         );
+        let fine_points: Vec<[f32; 4]> = fine
+            .ids()
+            .iter()
+            .map(|&i| {
+                let p = positions[i as usize];
+                [p.x, p.y, p.z, recon_scale[i as usize]]
+            })
+            .collect();
+        let by_slot = |coeffs: &[Vec3]| -> Vec<Vec3> {
+            fine.ids()
+                .iter()
+                .flat_map(|&i| {
+                    let i = i as usize;
+                    coeffs[i * count..(i + 1) * count].iter().copied()
+                })
+                .collect()
+        };
+        let fine_multi = by_slot(&multi_coeffs);
+        let fine_scattered = by_slot(&scattered_coeffs);
         let mut out = Self {
             params: *params,
             s_star: params.s_star,
@@ -565,6 +592,9 @@ impl InternalLights {
             g: vol.optics.g,
             recon_scale,
             fine,
+            fine_points,
+            fine_multi,
+            fine_scattered,
             clusters: LightGrid::build(&[], |_| false, vol.bounds, 1.0, 1),
             cluster_power: Vec::new(),
             light_power: Vec::new(),
@@ -744,8 +774,8 @@ impl InternalLights {
             return Vec3::ZERO;
         }
         let coeffs = match part {
-            Part::All => &self.multi_coeffs,
-            Part::Scattered => &self.scattered_coeffs,
+            Part::All => &self.fine_multi,
+            Part::Scattered => &self.fine_scattered,
         };
         // The lights' SH series are summed unclamped and the average is
         // clamped: clamping each light's noisy series at zero would bias
@@ -763,12 +793,22 @@ impl InternalLights {
         let mut sum = [0.0f32; 3 * MAX_COUNT];
         let sum = &mut sum[..width];
         let mut den = 0.0f32;
-        self.for_each_kernel_weight(p, |i, k| {
-            let w = k * self.recon_scale[i];
-            for (s, &c) in sum.iter_mut().zip(&flat[i * width..(i + 1) * width]) {
-                *s += w * c;
+        let h = self.kernel_radius;
+        let inv_h2 = 1.0 / (h * h);
+        self.fine.for_each_near_run(p, h, |run| {
+            for slot in run {
+                let [x, y, z, scale] = self.fine_points[slot];
+                let q = (Vec3::new(x, y, z) - p).length_squared() * inv_h2;
+                if q >= 1.0 {
+                    continue;
+                }
+                let k = (1.0 - q) * (1.0 - q);
+                let w = k * scale;
+                for (s, &c) in sum.iter_mut().zip(&flat[slot * width..(slot + 1) * width]) {
+                    *s += w * c;
+                }
+                den += k;
             }
-            den += k;
         });
         if den <= 0.0 {
             return Vec3::ZERO;

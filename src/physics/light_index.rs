@@ -142,10 +142,12 @@ impl LightGrid {
         (lo, lo + self.cell)
     }
 
-    /// Calls `f(i)` for every bucketed light in the cells that overlap the
-    /// box `[p − r, p + r]` (a superset of the lights within `r` of `p`).
+    /// Calls `f(range)` for every run of [`LightGrid::ids`] positions
+    /// whose cells overlap the box `[p − r, p + r]` (one run per row of
+    /// cells along x), for tables aligned with the ids: the same lights
+    /// as [`LightGrid::for_each_near`], read from contiguous memory.
     #[inline]
-    pub fn for_each_near(&self, p: Vec3, r: f32, mut f: impl FnMut(u32)) {
+    pub fn for_each_near_run(&self, p: Vec3, r: f32, mut f: impl FnMut(std::ops::Range<usize>)) {
         let lo = self.cell_coords(p - Vec3::splat(r));
         let hi = self.cell_coords(p + Vec3::splat(r));
         for z in lo.z..=hi.z {
@@ -153,11 +155,18 @@ impl LightGrid {
                 let row = self.res.x * (y + self.res.y * z);
                 let a = self.starts[(row + lo.x) as usize] as usize;
                 let b = self.starts[(row + hi.x + 1) as usize] as usize;
-                for &i in &self.ids[a..b] {
-                    f(i);
+                if a < b {
+                    f(a..b);
                 }
             }
         }
+    }
+
+    /// Calls `f(i)` for every bucketed light in the cells that overlap the
+    /// box `[p − r, p + r]` (a superset of the lights within `r` of `p`).
+    #[inline]
+    pub fn for_each_near(&self, p: Vec3, r: f32, mut f: impl FnMut(u32)) {
+        self.for_each_near_run(p, r, |run| self.ids[run].iter().for_each(|&i| f(i)));
     }
 }
 
