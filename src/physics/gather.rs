@@ -600,7 +600,11 @@ mod tests {
                         Clock::Geometric => 1.0,
                         Clock::OpticalDepth => 2.0 * rho,
                     };
-                    let want = if den > 0.0 { num * (scale_p / den) } else { Vec3::ZERO };
+                    let want = if den > 0.0 {
+                        num * (scale_p / den)
+                    } else {
+                        Vec3::ZERO
+                    };
                     let got = cache.reconstruct_multi(p, n, rho, part);
                     assert!(
                         (got - want).abs().max_element() <= 1e-4 * (1.0 + want.abs().max_element()),
