@@ -150,6 +150,10 @@ pub struct InternalArgs {
     /// The form of the gather's L1 (single scatter of the internal lights).
     #[arg(long, value_enum)]
     pub l1: Option<L1Arg>,
+    /// Scatterings inside the final window that the field form of L1
+    /// follows (1: the note's single-scatter kernel; 2, 3: the next terms).
+    #[arg(long)]
+    pub window_scatters: Option<u32>,
     /// Internal-light samples per camera sample.
     #[arg(long)]
     pub light_samples: Option<u32>,
@@ -189,6 +193,9 @@ impl InternalArgs {
         }
         if let Some(v) = self.l1 {
             settings.l1 = v.into();
+        }
+        if let Some(v) = self.window_scatters {
+            settings.window_scatters = v;
         }
         if let Some(v) = self.light_samples {
             settings.light_samples = v;

@@ -239,7 +239,7 @@ fn mirrors_match_wgsl_layout() {
             scattered_offset,
             n_terms,
             unclamped,
-            _pad
+            window_scatters
         ]
     );
 }
@@ -400,6 +400,19 @@ fn gather_agrees_chromatic_sphere() {
         24,
         256,
     );
+}
+
+/// Three scatterings inside the window (`window_scatters`), on the dense
+/// chromatic sphere at a long window (`s*` 2 mean free paths), where the
+/// second and third add 18 % to the red channel's image mean: the GPU
+/// follows them as the CPU does (a GPU that stopped after one failed by
+/// 82.5 σ in red, checked).
+#[test]
+fn gather_agrees_chromatic_sphere_three_window_scatterings() {
+    agree_gather_with("assets/scenes/chromatic_sphere.ron", 24, 256, |s| {
+        s.s_star = Some(2.0);
+        s.window_scatters = 3;
+    });
 }
 
 /// Light sets renewed (`resample_every > 0`): the GPU leaves the

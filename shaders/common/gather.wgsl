@@ -383,7 +383,9 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
 // `T(x, y)`), one sample: `b(y) ∫ dn' P(n·n') ∫ dr T(y, x') J(x', n')`
 // over the window, with `x' = y − r n'`, `n'` drawn from the phase
 // function and `r` uniformly within the clock's remaining budget, so that
-// `d³x' = r² dr dn'` cancels the `1/r²` (`field_l1_at`).
+// `d³x' = r² dr dn'` cancels the `1/r²`; with `window_scatters` m > 1 the
+// same step again from `x'` within what is left of the budget, m − 1
+// more times (`field_l1_at`).
 fn field_l1_at(
     x: vec3<f32>,
     dir: vec3<f32>,
@@ -395,34 +397,53 @@ fn field_l1_at(
     rng: ptr<function, Rng>,
 ) -> vec3<f32> {
     let clock = gather_params.clock;
-    let budget = gather_params.s_star - clock_to(clock, x, dir, t, len);
-    if budget <= 0.0 {
-        return vec3<f32>(0.0);
+    var budget = gather_params.s_star - clock_to(clock, x, dir, t, len);
+    let scatters = max(gather_params.window_scatters, 1u);
+    var point = y;
+    var rho_point = rho_y;
+    var towards = n;
+    var throughput = vec3<f32>(1.0);
+    var sum = vec3<f32>(0.0);
+    for (var scattering = 1u; scattering <= scatters; scattering++) {
+        if budget <= 0.0 {
+            break;
+        }
+        let u1 = rng_next_f32(rng);
+        let u2 = rng_next_f32(rng);
+        let travel = sample_hg(gather_params.g, towards, u1, u2);
+        let back = -travel;
+        let bc = medium_clip(point, back);
+        if !bc.hit {
+            break;
+        }
+        let exit = bc.t1;
+        let m = march_clock(clock, gather_params.s_star, point, back, 0.0, exit, exit, budget);
+        let r_max = select(exit, m.value, m.reached);
+        if r_max <= 0.0 {
+            break;
+        }
+        let r = rng_next_f32(rng) * r_max;
+        let xp = point + back * r;
+        let rho = density(xp);
+        var jv = reconstruct_multi(xp, travel, rho, gather_params.multi_offset);
+        if rho > 0.0 {
+            jv += gather_params.scatter * rho * single_scatter_source_at_rate(xp, travel, TRACKING_RATE, rng);
+        }
+        let more = scattering < scatters && rho > 0.0;
+        if all(jv == vec3<f32>(0.0)) && !more {
+            break;
+        }
+        throughput *= gather_params.scatter * rho_point
+            * transmittance_at_rate(point, back, r, TRACKING_RATE, rng) * r_max;
+        sum += throughput * jv;
+        if !more || all(throughput == vec3<f32>(0.0)) {
+            break;
+        }
+        let used = march_clock(clock, gather_params.s_star, point, back, 0.0, exit, r, 3.0e38);
+        budget -= select(used.value, 3.0e38, used.reached);
+        point = xp;
+        rho_point = rho;
+        towards = travel;
     }
-    let u1 = rng_next_f32(rng);
-    let u2 = rng_next_f32(rng);
-    let travel = sample_hg(gather_params.g, n, u1, u2);
-    let back = -travel;
-    let bc = medium_clip(y, back);
-    if !bc.hit {
-        return vec3<f32>(0.0);
-    }
-    let exit = bc.t1;
-    let m = march_clock(clock, gather_params.s_star, y, back, 0.0, exit, exit, budget);
-    let r_max = select(exit, m.value, m.reached);
-    if r_max <= 0.0 {
-        return vec3<f32>(0.0);
-    }
-    let r = rng_next_f32(rng) * r_max;
-    let xp = y + back * r;
-    let rho = density(xp);
-    var jv = reconstruct_multi(xp, travel, rho, gather_params.multi_offset);
-    if rho > 0.0 {
-        jv += gather_params.scatter * rho * single_scatter_source_at_rate(xp, travel, TRACKING_RATE, rng);
-    }
-    if all(jv == vec3<f32>(0.0)) {
-        return vec3<f32>(0.0);
-    }
-    let tr = transmittance_at_rate(y, back, r, TRACKING_RATE, rng);
-    return gather_params.scatter * rho_y * tr * jv * r_max;
+    return sum;
 }

@@ -48,7 +48,9 @@ struct GatherParams {
     scattered_offset: u32,
     n_terms: u32,
     unclamped: u32,
-    _pad: u32,
+    // Scatterings inside the window that the field form of L₁ follows
+    // (`InternalParams::window_scatters`).
+    window_scatters: u32,
 }
 
 // The clock tags `CLOCK_*` are in gated_walk.wgsl.

@@ -113,7 +113,7 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
         scattered_offset,
         n_terms: cache.params.terms,
         unclamped: u32::from(cache.params.renewed),
-        _pad: 0,
+        window_scatters: cache.params.window_scatters.max(1),
     };
     PackedLights {
         params,

@@ -241,8 +241,9 @@ pub struct GpuGatherParams {
     /// 1: the kernel reconstruction is left unclamped (light sets are
     /// renewed, `InternalParams::renewed`); 0: clamped at zero.
     pub unclamped: u32,
-    /// Padding to a multiple of 16 bytes.
-    pub _pad: u32,
+    /// Scatterings inside the window that the field form of `L₁` follows
+    /// (`InternalParams::window_scatters`).
+    pub window_scatters: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 192);
 

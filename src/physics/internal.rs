@@ -106,6 +106,11 @@ pub struct InternalParams {
     pub clock: Clock,
     /// The form of the gather's `L₁`.
     pub l1: L1Form,
+    /// Scatterings inside the final window that the field form of `L₁`
+    /// follows: 1 is METHOD.md §6's single-scatter kernel `G ≈ G_SS`;
+    /// each more adds the next term of `G(s)` inside the window
+    /// (1 ..= [`MAX_WINDOW_SCATTERS`]).
+    pub window_scatters: u32,
     /// Seed of the placement and the walks.
     pub seed: u64,
     /// Whether the render renews its light sets (`resample_every > 0`):
@@ -119,6 +124,10 @@ pub struct InternalParams {
 /// averages out the walks' noise in `J_i` (with 1.5, about 14 lights, the
 /// thin sphere showed blotches of ±20 % at `K = 64`).
 pub const AUTO_KERNEL_FACTOR: f32 = 2.5;
+
+/// The most scatterings inside the final window the gather follows
+/// ([`InternalParams::window_scatters`]).
+pub const MAX_WINDOW_SCATTERS: u32 = 3;
 
 /// `h₁ / h`: `L₁`'s kernel `1/(r² + h₁²)` is softened far less than the
 /// reconstruction averages. Its bias (METHOD.md §6: it vanishes as

@@ -198,6 +198,7 @@ pub fn internal_params_for_set(
             L1Kind::Field => L1Form::Field,
             L1Kind::Points => L1Form::Points,
         },
+        window_scatters: s.window_scatters,
         seed: settings
             .seed
             .wrapping_add((set as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)),

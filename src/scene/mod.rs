@@ -412,6 +412,13 @@ impl InternalSettings {
                 format!("{} must lie in 1..=256", self.light_samples),
             );
         }
+        let most = crate::physics::internal::MAX_WINDOW_SCATTERS;
+        if self.window_scatters == 0 || self.window_scatters > most {
+            return bad(
+                "window_scatters",
+                format!("{} must lie in 1..={most}", self.window_scatters),
+            );
+        }
         Ok(())
     }
 }

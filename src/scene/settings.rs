@@ -65,6 +65,11 @@ pub struct InternalSettings {
     pub clock: ClockKind,
     /// The form of the gather's `L₁`.
     pub l1: L1Kind,
+    /// Scatterings inside the final window that the field form of `L₁`
+    /// follows: 1 is the note's single-scatter kernel (METHOD.md §6), 2
+    /// and 3 add the next terms of the window's transport (see the
+    /// README, "Scatterings inside the window").
+    pub window_scatters: u32,
     /// Internal-light samples per camera sample in the final gather.
     pub light_samples: u32,
     /// Passes rendered with one set of internal lights before a fresh set
@@ -89,6 +94,7 @@ impl Default for InternalSettings {
             uniform_mix: 0.0,
             clock: ClockKind::OpticalDepth,
             l1: L1Kind::Field,
+            window_scatters: 1,
             light_samples: 2,
             resample_every: 0,
         }
