@@ -439,8 +439,7 @@ fn field_l1_at(
         if !more || all(throughput == vec3<f32>(0.0)) {
             break;
         }
-        let used = march_clock(clock, gather_params.s_star, point, back, 0.0, exit, r, 3.0e38);
-        budget -= select(used.value, 3.0e38, used.reached);
+        budget -= clock_to(clock, point, back, r, exit);
         point = xp;
         rho_point = rho;
         towards = travel;
