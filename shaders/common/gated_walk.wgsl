@@ -136,11 +136,8 @@ fn collision_probability(s_star: f32, p: vec3<f32>, d: vec3<f32>) -> f32 {
     if !clip.hit {
         return COLLISION_FLOOR;
     }
-    let m = march_clock(CLOCK_OPTICAL_DEPTH, s_star, p, d, 0.0, clip.t1, clip.t1, COLLISION_DEPTH);
-    if m.reached {
-        return 1.0;
-    }
-    return max(1.0 - exp(-m.value), COLLISION_FLOOR);
+    var chances = chances_along_ray(p, d, clip.t1, s_star);
+    return chance_at(&chances, 0.0);
 }
 
 // `collision_probability` at points of one ray asked for from its far end

@@ -279,21 +279,7 @@ pub fn collision_probability<D: DensityField>(
     let Some((_, exit)) = vol.clip(p, d) else {
         return COLLISION_FLOOR;
     };
-    let tau = match march_clock(
-        vol,
-        Clock::OpticalDepth,
-        s_star,
-        p,
-        d,
-        0.0,
-        exit,
-        exit,
-        COLLISION_DEPTH,
-    ) {
-        ClockMarch::Exhausted(tau) => tau,
-        ClockMarch::Reached(_) => return 1.0,
-    };
-    (-(-tau).exp_m1()).max(COLLISION_FLOOR)
+    ChancesAlongRay::new(p, d, exit, s_star).at(vol, 0.0)
 }
 
 /// [`collision_probability`] at points of one ray `origin + t dir`

@@ -802,34 +802,19 @@ impl InternalLights {
         let mut sum = [0.0f32; 3 * MAX_COUNT];
         let sum = &mut sum[..width];
         let mut den = 0.0f32;
-        let h = self.kernel_radius;
-        let inv_h2 = 1.0 / (h * h);
-        self.fine.for_each_near_run(p, h, |run| {
-            for slot in run {
-                let [x, y, z, scale] = self.fine_points[slot];
-                let q = (Vec3::new(x, y, z) - p).length_squared() * inv_h2;
-                if q >= 1.0 {
-                    continue;
-                }
-                let k = (1.0 - q) * (1.0 - q);
-                let w = k * scale;
-                for (s, &c) in sum.iter_mut().zip(&flat[slot * width..(slot + 1) * width]) {
-                    *s += w * c;
-                }
-                den += k;
+        self.for_each_kernel_slot(p, |slot, k| {
+            let w = k * self.fine_points[slot][3];
+            for (s, &c) in sum.iter_mut().zip(&flat[slot * width..(slot + 1) * width]) {
+                *s += w * c;
             }
+            den += k;
         });
         if den <= 0.0 {
             return Vec3::ZERO;
         }
         let mut y = [0.0f32; MAX_COUNT];
         sh_basis(self.sh_order, n, &mut y);
-        let num = sum
-            .chunks_exact(3)
-            .zip(&y)
-            .fold(Vec3::ZERO, |acc, (c, &yi)| {
-                acc + Vec3::new(c[0], c[1], c[2]) * yi
-            });
+        let num = Self::eval_sh(bytemuck::cast_slice(sum), &y);
         if self.params.renewed {
             num * (scale_p / den)
         } else {
@@ -851,13 +836,24 @@ impl InternalLights {
     /// within `h` of `p`, `K_h(r) = (1 − r²/h²)²`.
     #[inline]
     pub(crate) fn for_each_kernel_weight(&self, p: Vec3, mut f: impl FnMut(usize, f32)) {
+        let ids = self.fine.ids();
+        self.for_each_kernel_slot(p, |slot, k| f(ids[slot] as usize, k));
+    }
+
+    /// [`InternalLights::for_each_kernel_weight`] by slot of the fine grid
+    /// (the index into `fine.ids()` and the copies aligned with it), the
+    /// positions read from those copies in the order they are stored.
+    #[inline]
+    fn for_each_kernel_slot(&self, p: Vec3, mut f: impl FnMut(usize, f32)) {
         let h = self.kernel_radius;
         let inv_h2 = 1.0 / (h * h);
-        self.fine.for_each_near(p, h, |i| {
-            let i = i as usize;
-            let q = (self.lights[i].position - p).length_squared() * inv_h2;
-            if q < 1.0 {
-                f(i, (1.0 - q) * (1.0 - q));
+        self.fine.for_each_near_run(p, h, |run| {
+            for slot in run {
+                let [x, y, z, _] = self.fine_points[slot];
+                let q = (Vec3::new(x, y, z) - p).length_squared() * inv_h2;
+                if q < 1.0 {
+                    f(slot, (1.0 - q) * (1.0 - q));
+                }
             }
         });
     }
