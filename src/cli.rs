@@ -154,6 +154,10 @@ pub struct InternalArgs {
     /// follows (1: the note's single-scatter kernel; 2, 3: the next terms).
     #[arg(long)]
     pub window_scatters: Option<u32>,
+    /// Walks per light towards the camera, for the view's L0 (0: none;
+    /// L0 then reads the lights' spherical harmonics).
+    #[arg(long)]
+    pub view_walks: Option<u32>,
     /// Internal-light samples per camera sample.
     #[arg(long)]
     pub light_samples: Option<u32>,
@@ -196,6 +200,9 @@ impl InternalArgs {
         }
         if let Some(v) = self.window_scatters {
             settings.window_scatters = v;
+        }
+        if let Some(v) = self.view_walks {
+            settings.view_walks = v;
         }
         if let Some(v) = self.light_samples {
             settings.light_samples = v;

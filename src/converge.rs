@@ -353,7 +353,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
     );
     let _ = writeln!(
         report,
-        "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}, {} window scattering(s), {}\n",
+        "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}, {} window scattering(s), {} view walks, {}\n",
         i.lights,
         i.walks,
         i.terms,
@@ -363,6 +363,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
         i.clock,
         i.l1,
         i.window_scatters,
+        i.view_walks,
         match i.resample_every {
             0 => "one light set".to_owned(),
             p => format!("a fresh light set every {p} passes"),

@@ -239,7 +239,11 @@ fn mirrors_match_wgsl_layout() {
             scattered_offset,
             n_terms,
             unclamped,
-            window_scatters
+            window_scatters,
+            view_offset,
+            has_view,
+            _pad0,
+            _pad1
         ]
     );
 }
@@ -415,6 +419,24 @@ fn gather_agrees_chromatic_sphere_three_window_scatterings() {
     });
 }
 
+/// Walks towards the eye (`view_walks`): the GPU's `L₀` averages the
+/// lights' view estimates as the CPU's does. One light set of 16 spread
+/// walks per light, whose harmonics are far noisier than the view walks'
+/// values, so a GPU that evaluated the harmonics instead would disagree.
+#[test]
+fn gather_agrees_puffs_view_walks() {
+    let Some((_, _, cache)) = agree_gather_with("assets/scenes/puffs_grid.ron", 24, 256, |s| {
+        s.s_star = Some(0.5);
+        s.terms = 40;
+        s.lights = 2048;
+        s.walks = 16;
+        s.view_walks = 16;
+    }) else {
+        return;
+    };
+    assert!(cache.has_view());
+}
+
 /// Light sets renewed (`resample_every > 0`): the GPU leaves the
 /// reconstruction unclamped as the CPU does. With 4 walks per light the
 /// reconstruction is negative in places, so a GPU that still clamped would
@@ -491,12 +513,17 @@ use lantern::physics::sh::sh_basis;
 use lantern::physics::tracking::transmittance;
 use lantern::physics::volume::Volume;
 
-/// The scene's internal-lights parameters with `edit` applied.
+/// The scene's internal-lights parameters with `edit` applied (and the
+/// camera's eye, where `edit` asks for view walks).
 fn walk_params(prepared: &Prepared, edit: impl FnOnce(&mut InternalParams)) -> InternalParams {
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
     let mut p = internal_params(prepared, &settings);
     edit(&mut p);
+    if p.view_walks > 0 {
+        // The view walks look towards the scene's camera.
+        p.eye = prepared.camera.eye;
+    }
     p
 }
 
@@ -964,6 +991,20 @@ fn gather_mean(prepared: &Arc<Prepared>, cache: InternalLights, spp: u32, seed: 
 /// noise), and a GPU build with the albedo 10 % low does not.
 #[test]
 fn gather_with_gpu_built_lights_agrees_thin_sphere() {
+    gpu_lit_case(|_| {});
+}
+
+/// [`gather_with_gpu_built_lights_agrees_thin_sphere`] with 16 walks per
+/// light towards the eye (`view_walks`): the GPU's view walks estimate
+/// what the CPU's do (the GPU-built lights must carry them).
+#[test]
+fn gather_with_gpu_built_view_walks_agrees_thin_sphere() {
+    gpu_lit_case(|p| p.view_walks = 16);
+}
+
+/// The case of [`gather_with_gpu_built_lights_agrees_thin_sphere`], the
+/// parameters changed by `edit`.
+fn gpu_lit_case(edit: impl Fn(&mut InternalParams)) {
     let Some(ctx) = common::gpu() else { return };
     let scene = "assets/scenes/thin_sphere.ron";
     let side = 16;
@@ -978,7 +1019,10 @@ fn gather_with_gpu_built_lights_agrees_thin_sphere() {
     let t = Instant::now();
     let cpu_means: Vec<Vec3> = (0..8u64)
         .map(|seed| {
-            let params = walk_params(&prepared, |p| p.seed = 100 + seed);
+            let params = walk_params(&prepared, |p| {
+                edit(p);
+                p.seed = 100 + seed;
+            });
             let cache =
                 InternalLights::build(&prepared.volume, &prepared.lights, &params, &never).unwrap();
             gather_mean(&prepared, cache, spp, 200 + seed)
@@ -995,9 +1039,13 @@ fn gather_with_gpu_built_lights_agrees_thin_sphere() {
         .powf(0.5);
     let sigma = spread * (1.0 + 1.0 / n).sqrt();
     let t = Instant::now();
-    let params = walk_params(&prepared, |p| p.seed = 7);
+    let params = walk_params(&prepared, |p| {
+        edit(p);
+        p.seed = 7;
+    });
     let gpu_cache =
         build_internal_lights_gpu(&ctx, &prepared, &params).unwrap_or_else(|e| panic!("{e:#}"));
+    assert_eq!(gpu_cache.has_view(), params.view_walks > 0);
     let gpu_secs = t.elapsed().as_secs_f64();
     let z = (gather_mean(&prepared, gpu_cache, spp, 300) - mean) / sigma;
     // The same parameters (s* is the scene's default) with the albedo 10 %
@@ -1006,9 +1054,10 @@ fn gather_with_gpu_built_lights_agrees_thin_sphere() {
         build_internal_lights_gpu(&ctx, &wrong, &params).unwrap_or_else(|e| panic!("{e:#}"));
     let z_wrong = (gather_mean(&prepared, wrong_cache, spp, 300) - mean) / sigma;
     println!(
-        "{scene} gather {side}²×{spp} spp, M = {}, K = {}, N = {}: CPU-lit mean {:.5?} ± {:.5?} (8 light sets, {cpu_secs:.2} s); GPU-lit z {:.2?} (built in {gpu_secs:.2} s); GPU-lit with albedo × 0.9 z {:.2?}",
+        "{scene} gather {side}²×{spp} spp, M = {}, K = {}, {} view walks, N = {}: CPU-lit mean {:.5?} ± {:.5?} (8 light sets, {cpu_secs:.2} s); GPU-lit z {:.2?} (built in {gpu_secs:.2} s); GPU-lit with albedo × 0.9 z {:.2?}",
         params.lights,
         params.walks,
+        params.view_walks,
         params.terms,
         mean.to_array(),
         spread.to_array(),
@@ -1063,7 +1112,9 @@ fn walk_mirrors_match_wgsl_layout() {
             light_count,
             light_offset,
             walk_offset,
-            record_stride
+            record_stride,
+            eye,
+            view_walks
         ]
     );
 }

@@ -86,6 +86,14 @@ fn bad_values_are_rejected_with_a_clear_message() {
         &["density_scale"],
     );
     expect_error(&variant("spp: 64", "spp: 0"), &["render.spp"]);
+    expect_error(
+        &variant("spp: 64", "spp: 64, internal: (view_walks: 70000)"),
+        &["view_walks", "0..=65536"],
+    );
+    expect_error(
+        &variant("spp: 64", "spp: 64, internal: (window_scatters: 0)"),
+        &["window_scatters", "1..=3"],
+    );
 }
 
 #[test]

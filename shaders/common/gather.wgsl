@@ -222,7 +222,12 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         let y = x + dir * t;
         let rho = density(y);
         // The collided part is stored per unit chance of the collision.
-        var j_hat = reconstruct_multi(y, n, rho, gather_params.scattered_offset);
+        var j_hat: vec3<f32>;
+        if gather_params.has_view != 0u {
+            j_hat = reconstruct_view(y, rho);
+        } else {
+            j_hat = reconstruct_multi(y, n, rho, gather_params.scattered_offset);
+        }
         if any(j_hat != vec3<f32>(0.0)) {
             j_hat *= chance_at(&chances, t);
         }

@@ -8,7 +8,8 @@
 //   scattered part of J per light (`multi_offset`), then `sh_count` of the
 //   part of it the walks carried through a collision per light
 //   (`scattered_offset`), then `external_count` arriving lights per light
-//   (`T E`).
+//   (`T E`), then, with view walks, one vec4 per light: their estimate of
+//   the collided part towards the eye (`view_offset`).
 // - `internal_words`: the fine grid's `starts` and `ids`, the cluster
 //   grid's `starts` and `ids`, cluster powers and per-slot light powers (f32
 //   bits), and the live clusters; each table at an offset given below.
@@ -51,6 +52,12 @@ struct GatherParams {
     // Scatterings inside the window that the field form of L₁ follows
     // (`InternalParams::window_scatters`).
     window_scatters: u32,
+    // Vec4 table offset of the view walks' estimates, one per light, read
+    // when `has_view` is 1 (`InternalLights::reconstruct_view`).
+    view_offset: u32,
+    has_view: u32,
+    _pad0: u32,
+    _pad1: u32,
 }
 
 // The clock tags `CLOCK_*` are in gated_walk.wgsl.

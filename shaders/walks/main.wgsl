@@ -18,7 +18,11 @@
 // Per light, `walk_out` holds `record_stride` vec4 (xyz used): `sh_count`
 // coefficients of `F`, `sh_count` of the multiply scattered part,
 // `sh_count` of what of it the walks carried through a collision,
-// `external_count` arriving lights, `n_terms + 1` term energies. Keep
+// `external_count` arriving lights, `n_terms + 1` term energies, then with
+// view walks one more: their mean collided part per unit chance towards
+// the eye (walks `K .. K + view_walks` of the light, all along
+// `normalize(eye − x)`; "Walks towards the eye" in
+// src/physics/internal.rs). Keep
 // `WalkParams` in sync with `GpuWalkParams` in src/gpu/mirrors.rs.
 
 // Stream index of the walks (`WALK_PASS` in src/physics/internal.rs).
@@ -51,6 +55,9 @@ struct WalkParams {
     light_offset: u32,
     walk_offset: u32,
     record_stride: u32,
+    // The camera's eye and the walks per light towards it.
+    eye: vec3<f32>,
+    view_walks: u32,
 }
 
 @group(0) @binding(5) var<uniform> walk_params: WalkParams;
@@ -109,11 +116,21 @@ fn walk_lights(
     let w = wp.walk_offset + lane;
     var per_walk: GateTerms;
     var n = vec3<f32>(0.0, 0.0, 1.0);
-    if w < wp.walks {
-        let z = 1.0 - f32(2u * w + 1u) / f32(wp.walks);
-        let phi = phi0 + f32(w) * GOLDEN_ANGLE;
-        let s = sqrt(max(1.0 - z * z, 0.0));
-        n = quat_rotate(rotation, vec3<f32>(s * cos(phi), s * sin(phi), z));
+    // A spread walk (SH, F, energies) or a walk towards the eye.
+    let spread = w < wp.walks;
+    let towards_eye = !spread && w < wp.walks + wp.view_walks;
+    if spread || towards_eye {
+        if spread {
+            let z = 1.0 - f32(2u * w + 1u) / f32(wp.walks);
+            let phi = phi0 + f32(w) * GOLDEN_ANGLE;
+            let s = sqrt(max(1.0 - z * z, 0.0));
+            n = quat_rotate(rotation, vec3<f32>(s * cos(phi), s * sin(phi), z));
+        } else {
+            let v = wp.eye - x;
+            if dot(v, v) > 0.0 {
+                n = normalize(v);
+            }
+        }
         var walk_rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_PASS + 1u + w);
         let settings = GateSettings(wp.s_star, terms, wp.clock, wp.rr_start);
         accumulate_j_from(x, n, settings, 1u, &walk_rng, &per_walk);
@@ -126,7 +143,7 @@ fn walk_lights(
     // rest, which the gather marches exactly), per unit chance of the
     // collision (`Part::Scattered`).
     var after_collision = vec3<f32>(0.0);
-    if w < wp.walks {
+    if spread || towards_eye {
         after_collision = total - walk_unscattered;
         if any(after_collision != vec3<f32>(0.0)) {
             after_collision /= collision_probability(wp.s_star, x, -n);
@@ -138,10 +155,22 @@ fn walk_lights(
     }
     let y = sh_basis(wp.sh_order, n);
 
+    // Only spread walks feed the harmonics and the energies, only walks
+    // towards the eye the view estimate.
+    var view = vec3<f32>(0.0);
+    if towards_eye {
+        view = after_collision / f32(wp.view_walks);
+        total = vec3<f32>(0.0);
+        after_collision = vec3<f32>(0.0);
+        first = vec3<f32>(0.0);
+        per_walk = GateTerms();
+    }
+
     // Quantities: F's coefficients, the multiply scattered part's, its
-    // collided part's, then the energies of k = 1..=N (k = 0 comes from the
-    // arrival below).
-    let quantities = 3u * count + terms;
+    // collided part's, the energies of k = 1..=N (k = 0 comes from the
+    // arrival below), then the view estimate if there are view walks.
+    let spread_quantities = 3u * count + terms;
+    let quantities = spread_quantities + min(wp.view_walks, 1u);
     for (var base = 0u; base < quantities; base += ROUND) {
         for (var j = 0u; j < ROUND; j++) {
             let q = base + j;
@@ -152,8 +181,10 @@ fn walk_lights(
                 v = total * (y[q - count] * w_dir);
             } else if q < 3u * count {
                 v = after_collision * (y[q - 2u * count] * w_dir);
-            } else if q < quantities {
+            } else if q < spread_quantities {
                 v = per_walk[q - 3u * count + 1u] * (volume * w_dir);
+            } else if q < quantities {
+                v = view;
             }
             partial[lane * ROUND + j] = vec4<f32>(v, 0.0);
         }
@@ -165,7 +196,9 @@ fn walk_lights(
                 sum += partial[l * ROUND + lane].xyz;
             }
             var slot = record + q;
-            if q >= 3u * count {
+            if q >= spread_quantities {
+                slot = record + wp.record_stride - 1u;
+            } else if q >= 3u * count {
                 slot = energy_at + 1u + (q - 3u * count);
             }
             walk_out[slot] += vec4<f32>(sum, 0.0);

@@ -50,6 +50,14 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
     vec4.extend(cache.scattered_coeffs.iter().map(|c| [c.x, c.y, c.z, 0.0]));
     let arrival_offset = vec4.len() as u32;
     vec4.extend(cache.arrival.iter().map(|c| [c.x, c.y, c.z, 0.0]));
+    let view_offset = vec4.len() as u32;
+    let has_view = cache.has_view();
+    if has_view {
+        vec4.extend((0..n).map(|i| {
+            let v = cache.view(i).unwrap_or(glam::Vec3::ZERO);
+            [v.x, v.y, v.z, 0.0]
+        }));
+    }
     if vec4.is_empty() {
         vec4.push([0.0; 4]);
     }
@@ -114,6 +122,10 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
         n_terms: cache.params.terms,
         unclamped: u32::from(cache.params.renewed),
         window_scatters: cache.params.window_scatters.max(1),
+        view_offset,
+        has_view: u32::from(has_view),
+        _pad0: 0,
+        _pad1: 0,
     };
     PackedLights {
         params,

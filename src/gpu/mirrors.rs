@@ -244,8 +244,18 @@ pub struct GpuGatherParams {
     /// Scatterings inside the window that the field form of `L₁` follows
     /// (`InternalParams::window_scatters`).
     pub window_scatters: u32,
+    /// Vec4 table offset: per light the view walks' estimate
+    /// (`InternalLights::reconstruct_view`), if `has_view`.
+    pub view_offset: u32,
+    /// 1: `L₀`'s collided part averages the view walks' estimates; 0: it
+    /// evaluates the SH at `scattered_offset`.
+    pub has_view: u32,
+    /// Padding to a multiple of 16 bytes.
+    pub _pad0: u32,
+    /// See `_pad0`.
+    pub _pad1: u32,
 }
-const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 192);
+const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 208);
 
 /// The placement grid and mixture of the internal lights
 /// (`PlacementDensity`). Keep in sync with `PlacementParams` in
@@ -309,8 +319,13 @@ pub struct GpuWalkParams {
     pub walk_offset: u32,
     /// vec4 per light in the output.
     pub record_stride: u32,
+    /// The camera's eye, which the view walks look towards.
+    pub eye: [f32; 3],
+    /// Walks per light towards the eye (`InternalParams::view_walks`),
+    /// after the `walks` spread ones.
+    pub view_walks: u32,
 }
-const _: () = assert!(std::mem::size_of::<GpuWalkParams>() == 48);
+const _: () = assert!(std::mem::size_of::<GpuWalkParams>() == 64);
 
 /// One pixel's running statistics on the GPU: Welford mean and sum of
 /// squared deviations of the estimate, and the mean of its single-scattering

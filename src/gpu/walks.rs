@@ -19,6 +19,10 @@
 //!   loop iterations (see the README), and hardware drivers time out long
 //!   dispatches.
 //!
+//!   With view walks (`InternalParams::view_walks`) each light's walks
+//!   `K .. K + view_walks` all go towards the eye and add one more value
+//!   per light ("Walks towards the eye" in `physics::internal`).
+//!
 //! Positions, weights, SH coefficients, arriving light and term energies
 //! are read back (a few MiB) and the CPU's [`InternalLights::assemble`]
 //! builds the kernel radius and the spatial indices.
@@ -136,7 +140,11 @@ pub fn build_internal_lights_gpu(
     }
     // Refuse before any work if the results cannot be bound.
     let n_ext = prepared.lights.suns.len() + prepared.lights.points.len();
-    let stride = 3 * sh_count(params.sh_order.min(MAX_ORDER)) + n_ext + params.terms as usize + 1;
+    let stride = 3 * sh_count(params.sh_order.min(MAX_ORDER))
+        + n_ext
+        + params.terms as usize
+        + 1
+        + usize::from(params.view_walks > 0);
     ctx.check_storage_size(
         "internal-light walk results",
         params.lights.max(1) as u64 * stride as u64 * 16,
@@ -158,7 +166,11 @@ pub fn build_internal_lights_gpu(
     let mut sources = LightSources::with_capacity(lights, count, n_ext, gates);
     for record in out.chunks_exact(stride).take(m) {
         let (sh, rest) = record.split_at(3 * count);
-        let (arrival, energy) = rest.split_at(n_ext);
+        let (arrival, rest) = rest.split_at(n_ext);
+        let (energy, view) = rest.split_at(gates);
+        if let Some(v) = view.first() {
+            sources.view.push(v3(v));
+        }
         sources.push(
             sh[..count].iter().map(v3),
             sh[count..2 * count].iter().map(v3),
@@ -326,7 +338,7 @@ fn walk(
     let order = params.sh_order.min(MAX_ORDER);
     let count = sh_count(order) as u32;
     let n_ext = (prepared.lights.suns.len() + prepared.lights.points.len()) as u32;
-    let stride = 3 * count + n_ext + params.terms + 1;
+    let stride = 3 * count + n_ext + params.terms + 1 + u32::from(params.view_walks > 0);
     let walks = params.walks.max(1);
     let out_bytes = build.light_count as u64 * stride as u64 * 16;
     ctx.check_storage_size("internal-light walk results", out_bytes)?;
@@ -347,6 +359,8 @@ fn walk(
         light_offset: 0,
         walk_offset: 0,
         record_stride: stride,
+        eye: params.eye.to_array(),
+        view_walks: params.view_walks,
     };
     let (params_buf, out, group) = ctx.scoped("setting up the internal-light walks", || {
         let params_buf = uniform(ctx, "walk uniform", &walk_params);
@@ -368,7 +382,7 @@ fn walk(
     // One dispatch per block of 64 walks and of at most MAX_GROUPS lights;
     // each adds its sums to `out` (zeroed at creation).
     ctx.scoped("running the internal-light walks", || {
-        for walk_offset in (0..walks).step_by(WALK_LANES as usize) {
+        for walk_offset in (0..walks + params.view_walks).step_by(WALK_LANES as usize) {
             for light_offset in (0..build.light_count).step_by(MAX_GROUPS as usize) {
                 walk_params.walk_offset = walk_offset;
                 walk_params.light_offset = light_offset;

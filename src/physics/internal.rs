@@ -29,6 +29,22 @@
 //! phase lobe projected on order-3 SH and averaged over the kernel put the
 //! thin sphere's rim pixels +20…35 % high and its lit side 10…20 % low.
 //!
+//! # Walks towards the eye
+//!
+//! The camera sees `J` along the camera rays only: at a light, the one
+//! direction `n_i = (eye − x_i)/|eye − x_i|`, to within the kernel's
+//! angular size `h / |eye − x_i|` for the rays through its support. With
+//! `view_walks` `K_v > 0` each light also runs `K_v` walks from `x_i` along
+//! `−n_i` and keeps the mean of their collided part per unit chance
+//! ([`Part::Scattered`]) as one RGB value; `L₀`'s reconstruction averages
+//! those ([`InternalLights::reconstruct_view`]). Evaluating an order-`L`
+//! series projected from `K` walks in spread directions has about `(L+1)²`
+//! times the variance of a walk's value in the one direction it
+//! estimates; on the puffs `K_v` = 16 walks towards the eye took the
+//! light sets' noise in `L₀` from 31.9 % to 7.5 % of the image mean
+//! (README, "Walks towards the eye"). The spherical harmonics still serve
+//! `L₁`, `F` and the gizmos.
+//!
 //! With the optical-depth clock the walks return `Ĵ_k = c_g(x_i) J^τ_k`
 //! (see [`super::gated_walk`]), and everything below uses `Ĵ` in place of
 //! `J`; `k = 0` is `S₁` for both clocks.
@@ -111,6 +127,15 @@ pub struct InternalParams {
     /// each more adds the next term of `G(s)` inside the window
     /// (1 ..= [`MAX_WINDOW_SCATTERS`]).
     pub window_scatters: u32,
+    /// Walks per light along the direction from the light towards `eye`
+    /// (0: none): an estimate of the collided part of `J_i` in the one
+    /// direction the camera sees it in, which `L₀`'s reconstruction then
+    /// averages instead of evaluating the lights' spherical harmonics
+    /// ([`InternalLights::reconstruct_view`]).
+    pub view_walks: u32,
+    /// The camera's eye, which the view walks look towards (they make the
+    /// lights depend on it: moving the camera re-samples them).
+    pub eye: Vec3,
     /// Seed of the placement and the walks.
     pub seed: u64,
     /// Whether the render renews its light sets (`resample_every > 0`):
@@ -231,6 +256,10 @@ pub struct InternalLights {
     /// kernel reconstruction visits the lights, so that it reads them
     /// from contiguous memory rather than all over the light arrays.
     fine_points: Vec<[f32; 4]>,
+    /// [`LightSources::view`]: per light (empty without view walks).
+    pub(crate) view: Vec<Vec3>,
+    /// `view` aligned with `fine.ids()`.
+    fine_view: Vec<Vec3>,
     fine_multi: Vec<Vec3>,
     fine_scattered: Vec<Vec3>,
     /// Light clusters for the gather's light selection.
@@ -265,6 +294,10 @@ pub struct LightSources {
     pub arrival: Vec<Vec3>,
     /// The energy each term `k = 0..=N` carries over all lights.
     pub term_energy: Vec<Vec3>,
+    /// Per light, the collided part of `J` towards the eye per unit chance
+    /// of the collision (see the module doc, "Walks towards the eye");
+    /// empty without view walks.
+    pub view: Vec<Vec3>,
 }
 
 impl LightSources {
@@ -284,6 +317,7 @@ impl LightSources {
             scattered_coeffs: Vec::with_capacity(m * count),
             arrival: Vec::with_capacity(m * n_ext),
             term_energy: vec![Vec3::ZERO; gates],
+            view: Vec::new(),
         }
     }
 
@@ -400,6 +434,7 @@ impl InternalLights {
         let tr_estimates = (walks / 4).clamp(4, 64);
         let scatter = vol.optics.albedo * vol.optics.sigma_t;
         struct Walked {
+            view: Vec3,
             f: Vec<Vec3>,
             multi: Vec<Vec3>,
             scattered: Vec<Vec3>,
@@ -476,7 +511,38 @@ impl InternalLights {
                         energy[k] += per_walk[k] * (light.weight * w_dir);
                     }
                 }
+                // Walks towards the eye: the collided part in the one
+                // direction the camera sees, per unit chance.
+                let mut view = Vec3::ZERO;
+                if params.view_walks > 0 {
+                    let n = (params.eye - x).try_normalize().unwrap_or(Vec3::Z);
+                    for _ in 0..params.view_walks {
+                        per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                        unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                        accumulate_j_from(
+                            vol,
+                            external,
+                            x,
+                            n,
+                            &gate,
+                            1,
+                            &mut rng,
+                            &mut per_walk,
+                            Some(&mut unscattered),
+                        );
+                        view += collided_per_unit_chance(
+                            vol,
+                            params.s_star,
+                            x,
+                            n,
+                            &per_walk,
+                            &unscattered,
+                        );
+                    }
+                    view /= params.view_walks as f32;
+                }
                 Some(Walked {
+                    view,
                     f,
                     multi,
                     scattered,
@@ -490,6 +556,9 @@ impl InternalLights {
         }
         let mut sources = LightSources::with_capacity(lights, count, n_ext, terms + 1);
         for w in walked.into_iter().flatten() {
+            if params.view_walks > 0 {
+                sources.view.push(w.view);
+            }
             sources.push(w.f, w.multi, w.scattered, w.arrival, w.energy);
         }
         let t_walk = start.elapsed().as_secs_f64();
@@ -517,6 +586,7 @@ impl InternalLights {
             scattered_coeffs,
             arrival,
             term_energy,
+            view,
         } = sources;
         let start = Instant::now();
         let m = lights.len().max(1);
@@ -579,6 +649,16 @@ impl InternalLights {
                 })
                 .collect()
         };
+        let view = if view.len() == lights.len() {
+            view
+        } else {
+            Vec::new()
+        };
+        let fine_view: Vec<Vec3> = if view.is_empty() {
+            Vec::new()
+        } else {
+            fine.ids().iter().map(|&i| view[i as usize]).collect()
+        };
         let fine_multi = by_slot(&multi_coeffs);
         let fine_scattered = by_slot(&scattered_coeffs);
         let mut out = Self {
@@ -602,6 +682,8 @@ impl InternalLights {
             recon_scale,
             fine,
             fine_points,
+            view,
+            fine_view,
             fine_multi,
             fine_scattered,
             clusters: LightGrid::build(&[], |_| false, vol.bounds, 1.0, 1),
@@ -815,6 +897,44 @@ impl InternalLights {
         let mut y = [0.0f32; MAX_COUNT];
         sh_basis(self.sh_order, n, &mut y);
         let num = Self::eval_sh(bytemuck::cast_slice(sum), &y);
+        if self.params.renewed {
+            num * (scale_p / den)
+        } else {
+            (num * (scale_p / den)).max(Vec3::ZERO)
+        }
+    }
+
+    /// Whether the lights carry the view walks' estimates
+    /// ([`InternalParams::view_walks`]).
+    pub fn has_view(&self) -> bool {
+        !self.view.is_empty()
+    }
+
+    /// The view walks' estimate of light `i` ([`LightSources::view`]), if
+    /// there were view walks.
+    pub fn view(&self, i: usize) -> Option<Vec3> {
+        self.view.get(i).copied()
+    }
+
+    /// `L₀`'s collided part at `p` as the camera sees it: the kernel
+    /// average of the lights' view-walk estimates (the module doc, "Walks
+    /// towards the eye"), in place of
+    /// `reconstruct_multi(p, n, density_at_p, Part::Scattered)` for `n`
+    /// towards the eye. Zero without view walks.
+    pub fn reconstruct_view(&self, p: Vec3, density_at_p: f32) -> Vec3 {
+        let scale_p = self.reconstruction_scale(density_at_p);
+        if scale_p <= 0.0 || self.fine_view.is_empty() {
+            return Vec3::ZERO;
+        }
+        let mut num = Vec3::ZERO;
+        let mut den = 0.0f32;
+        self.for_each_kernel_slot(p, |slot, k| {
+            num += self.fine_view[slot] * (k * self.fine_points[slot][3]);
+            den += k;
+        });
+        if den <= 0.0 {
+            return Vec3::ZERO;
+        }
         if self.params.renewed {
             num * (scale_p / den)
         } else {

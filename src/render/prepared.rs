@@ -199,6 +199,14 @@ pub fn internal_params_for_set(
             L1Kind::Points => L1Form::Points,
         },
         window_scatters: s.window_scatters,
+        view_walks: s.view_walks,
+        // Only the view walks tie the lights to the camera: without them
+        // moving the camera must not re-sample the lights.
+        eye: if s.view_walks > 0 {
+            prepared.camera.eye
+        } else {
+            glam::Vec3::ZERO
+        },
         seed: settings
             .seed
             .wrapping_add((set as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)),

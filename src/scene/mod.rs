@@ -412,6 +412,12 @@ impl InternalSettings {
                 format!("{} must lie in 1..=256", self.light_samples),
             );
         }
+        if self.view_walks > MAX_WALKS {
+            return bad(
+                "view_walks",
+                format!("{} must lie in 0..={MAX_WALKS}", self.view_walks),
+            );
+        }
         let most = crate::physics::internal::MAX_WINDOW_SCATTERS;
         if self.window_scatters == 0 || self.window_scatters > most {
             return bad(

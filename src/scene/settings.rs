@@ -70,6 +70,10 @@ pub struct InternalSettings {
     /// and 3 add the next terms of the window's transport (see the
     /// README, "Scatterings inside the window").
     pub window_scatters: u32,
+    /// Walks per light along the direction towards the camera, for the
+    /// view's `L₀` (0: none, `L₀` reads the lights' spherical harmonics;
+    /// see the README, "Walks towards the eye").
+    pub view_walks: u32,
     /// Internal-light samples per camera sample in the final gather.
     pub light_samples: u32,
     /// Passes rendered with one set of internal lights before a fresh set
@@ -95,6 +99,7 @@ impl Default for InternalSettings {
             clock: ClockKind::OpticalDepth,
             l1: L1Kind::Field,
             window_scatters: 1,
+            view_walks: 0,
             light_samples: 2,
             resample_every: 0,
         }
