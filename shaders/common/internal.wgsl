@@ -78,11 +78,20 @@ fn reconstruction_scale(density_at_p: f32) -> f32 {
 // `gather_params.multi_offset` for all of it (`L₁`), `scattered_offset`
 // for what the walks carried through a collision (`L₀`).
 fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32) -> vec3<f32> {
+    return kernel_average(p, n, density_at_p, offset, false);
+}
+
+// The normalised kernel average at `p` of each light's series at `offset`
+// evaluated towards `n`, or (`from_view`) of its view-walk estimate.
+fn kernel_average(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32, from_view: bool) -> vec3<f32> {
     let scale_p = reconstruction_scale(density_at_p);
     if scale_p <= 0.0 {
         return vec3<f32>(0.0);
     }
-    var y = sh_basis(gather_params.sh_order, n);
+    var y: array<f32, 25>;
+    if !from_view {
+        y = sh_basis(gather_params.sh_order, n);
+    }
     let h = gather_params.kernel_radius;
     let inv_h2 = 1.0 / (h * h);
     let res = gather_params.fine_res;
@@ -102,7 +111,13 @@ fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32)
                 let q = dot(d, d) * inv_h2;
                 if q < 1.0 {
                     let w = (1.0 - q) * (1.0 - q);
-                    num += eval_sh(offset, i, &y) * (w * light.recon_scale);
+                    var value: vec3<f32>;
+                    if from_view {
+                        value = internal_vec4[gather_params.view_offset + i].xyz;
+                    } else {
+                        value = eval_sh(offset, i, &y);
+                    }
+                    num += value * (w * light.recon_scale);
                     den += w;
                 }
             }
@@ -123,40 +138,5 @@ fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32)
 // the lights' view-walk estimates (`InternalLights::reconstruct_view`), in
 // place of `reconstruct_multi(p, n, density_at_p, scattered_offset)`.
 fn reconstruct_view(p: vec3<f32>, density_at_p: f32) -> vec3<f32> {
-    let scale_p = reconstruction_scale(density_at_p);
-    if scale_p <= 0.0 {
-        return vec3<f32>(0.0);
-    }
-    let h = gather_params.kernel_radius;
-    let inv_h2 = 1.0 / (h * h);
-    let res = gather_params.fine_res;
-    let lo = light_grid_coords(p - vec3<f32>(h), gather_params.fine_min, gather_params.fine_cell, res);
-    let hi = light_grid_coords(p + vec3<f32>(h), gather_params.fine_min, gather_params.fine_cell, res);
-    var num = vec3<f32>(0.0);
-    var den = 0.0;
-    for (var z = lo.z; z <= hi.z; z++) {
-        for (var yy = lo.y; yy <= hi.y; yy++) {
-            let row = res.x * (yy + res.y * z);
-            let a = fine_start(row + lo.x);
-            let b = fine_start(row + hi.x + 1u);
-            for (var k = a; k < b; k++) {
-                let i = fine_id(k);
-                let light = internal_light(i);
-                let d = light.position - p;
-                let q = dot(d, d) * inv_h2;
-                if q < 1.0 {
-                    let w = (1.0 - q) * (1.0 - q);
-                    num += internal_vec4[gather_params.view_offset + i].xyz * (w * light.recon_scale);
-                    den += w;
-                }
-            }
-        }
-    }
-    if den <= 0.0 {
-        return vec3<f32>(0.0);
-    }
-    if gather_params.unclamped != 0u {
-        return num * (scale_p / den);
-    }
-    return max(num * (scale_p / den), vec3<f32>(0.0));
+    return kernel_average(p, vec3<f32>(0.0, 0.0, 1.0), density_at_p, 0u, true);
 }

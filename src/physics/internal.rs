@@ -474,6 +474,24 @@ impl InternalLights {
                 // `walks` points under a uniformly random rotation (each
                 // direction is still uniform, so the projection stays
                 // unbiased, but the set covers the sphere evenly).
+                // One walk from `x` with `n`, its terms `k ≥ 1` and their
+                // unscattered part in the two buffers.
+                let walk_once =
+                    |n: Vec3, rng: &mut Rng, per_walk: &mut [Vec3], unscattered: &mut [Vec3]| {
+                        per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                        unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                        accumulate_j_from(
+                            vol,
+                            external,
+                            x,
+                            n,
+                            &gate,
+                            1,
+                            rng,
+                            per_walk,
+                            Some(unscattered),
+                        );
+                    };
                 let rotation = random_rotation(&mut rng);
                 let phi0 = 2.0 * std::f32::consts::PI * rng.next_f32();
                 for w in 0..walks {
@@ -481,19 +499,7 @@ impl InternalLights {
                     let phi = phi0 + w as f32 * GOLDEN_ANGLE;
                     let s = (1.0 - z * z).max(0.0).sqrt();
                     let n = rotation * Vec3::new(s * phi.cos(), s * phi.sin(), z);
-                    per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
-                    unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
-                    accumulate_j_from(
-                        vol,
-                        external,
-                        x,
-                        n,
-                        &gate,
-                        1,
-                        &mut rng,
-                        &mut per_walk,
-                        Some(&mut unscattered),
-                    );
+                    walk_once(n, &mut rng, &mut per_walk, &mut unscattered);
                     let total: Vec3 = per_walk[1..].iter().sum();
                     if total == Vec3::ZERO {
                         continue;
@@ -517,19 +523,7 @@ impl InternalLights {
                 if params.view_walks > 0 {
                     let n = (params.eye - x).try_normalize().unwrap_or(Vec3::Z);
                     for _ in 0..params.view_walks {
-                        per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
-                        unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
-                        accumulate_j_from(
-                            vol,
-                            external,
-                            x,
-                            n,
-                            &gate,
-                            1,
-                            &mut rng,
-                            &mut per_walk,
-                            Some(&mut unscattered),
-                        );
+                        walk_once(n, &mut rng, &mut per_walk, &mut unscattered);
                         view += collided_per_unit_chance(
                             vol,
                             params.s_star,
