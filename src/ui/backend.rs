@@ -451,7 +451,13 @@ struct LightsCache {
 impl LightsCache {
     fn key_of(job: &Job) -> (Scene, PathBuf) {
         let mut scene = job.scene.clone();
+        // The lights do not depend on the camera, except for the view
+        // walks' eye (`InternalParams::eye`).
+        let eye = scene.camera.eye;
         scene.camera = crate::scene::Camera::default();
+        if scene.render.internal.view_walks > 0 {
+            scene.camera.eye = eye;
+        }
         scene.render.spp = 0;
         scene.render.method = Method::Internal;
         // Light set 0 does not depend on how often later sets replace it,
@@ -1060,5 +1066,33 @@ fn stream_image(estimator: Estimator, films: &[Film; 3]) -> StreamImage {
         single: Some(films[1].mean()),
         internal: Some(films[2].mean()),
         gpu: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn job(eye: Vec3, view_walks: u32) -> Job {
+        let mut scene = Scene::default();
+        scene.camera.eye = eye;
+        scene.render.internal.view_walks = view_walks;
+        Job {
+            scene,
+            scene_dir: PathBuf::from("."),
+            estimators: vec![Estimator::Internal],
+            max_spp: 1,
+            backend: Backend::Cpu,
+        }
+    }
+
+    /// Moving the camera keeps the cached lights, unless they hold view
+    /// walks towards the old eye.
+    #[test]
+    fn lights_cache_follows_the_eye_only_with_view_walks() {
+        let (a, b) = (Vec3::new(0.0, 0.0, 4.0), Vec3::new(1.0, 0.5, 4.0));
+        assert!(LightsCache::key_of(&job(a, 0)) == LightsCache::key_of(&job(b, 0)));
+        assert!(LightsCache::key_of(&job(a, 16)) != LightsCache::key_of(&job(b, 16)));
+        assert!(LightsCache::key_of(&job(a, 16)) == LightsCache::key_of(&job(a, 16)));
     }
 }
