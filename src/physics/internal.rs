@@ -470,10 +470,6 @@ impl InternalLights {
                 let mut unscattered = vec![Vec3::ZERO; terms + 1];
                 let mut y = [0.0f32; MAX_COUNT];
                 let w_dir = 4.0 * std::f32::consts::PI / walks as f32;
-                // Stratified directions: a spherical Fibonacci lattice of
-                // `walks` points under a uniformly random rotation (each
-                // direction is still uniform, so the projection stays
-                // unbiased, but the set covers the sphere evenly).
                 // One walk from `x` with `n`, its terms `k ≥ 1` and their
                 // unscattered part in the two buffers.
                 let walk_once =
@@ -492,6 +488,10 @@ impl InternalLights {
                             Some(unscattered),
                         );
                     };
+                // Stratified directions: a spherical Fibonacci lattice of
+                // `walks` points under a uniformly random rotation (each
+                // direction is still uniform, so the projection stays
+                // unbiased, but the set covers the sphere evenly).
                 let rotation = random_rotation(&mut rng);
                 let phi0 = 2.0 * std::f32::consts::PI * rng.next_f32();
                 for w in 0..walks {
