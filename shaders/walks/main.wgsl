@@ -86,6 +86,16 @@ fn random_rotation(rng: ptr<function, Rng>) -> vec4<f32> {
     return normalize(vec4<f32>(a * sin(tau * u2), a * cos(tau * u2), b * sin(tau * u3), b * cos(tau * u3)));
 }
 
+// The direction from `x` towards the eye, +z where they coincide (the
+// CPU's `try_normalize().unwrap_or(Vec3::Z)`).
+fn eye_direction(x: vec3<f32>) -> vec3<f32> {
+    let v = walk_params.eye - x;
+    if dot(v, v) > 0.0 {
+        return normalize(v);
+    }
+    return vec3<f32>(0.0, 0.0, 1.0);
+}
+
 @compute @workgroup_size(64, 1, 1)
 fn walk_lights(
     @builtin(workgroup_id) group: vec3<u32>,
@@ -126,10 +136,7 @@ fn walk_lights(
             let s = sqrt(max(1.0 - z * z, 0.0));
             n = quat_rotate(rotation, vec3<f32>(s * cos(phi), s * sin(phi), z));
         } else {
-            let v = wp.eye - x;
-            if dot(v, v) > 0.0 {
-                n = normalize(v);
-            }
+            n = eye_direction(x);
         }
         var walk_rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_PASS + 1u + w);
         let settings = GateSettings(wp.s_star, terms, wp.clock, wp.rr_start);
@@ -142,10 +149,12 @@ fn walk_lights(
     // What the walk carried through a collision (`walk_unscattered`: the
     // rest, which the gather marches exactly), per unit chance of the
     // collision (`Part::Scattered`).
+    // The walks towards the eye share `x` and `n`: their sum is divided by
+    // the chance once, where the workgroup reduces it (below).
     var after_collision = vec3<f32>(0.0);
     if spread || towards_eye {
         after_collision = total - walk_unscattered;
-        if any(after_collision != vec3<f32>(0.0)) {
+        if spread && any(after_collision != vec3<f32>(0.0)) {
             after_collision /= collision_probability(wp.s_star, x, -n);
         }
     }
@@ -198,6 +207,9 @@ fn walk_lights(
             var slot = record + q;
             if q >= spread_quantities {
                 slot = record + wp.record_stride - 1u;
+                if any(sum != vec3<f32>(0.0)) {
+                    sum /= collision_probability(wp.s_star, x, -eye_direction(x));
+                }
             } else if q >= 3u * count {
                 slot = energy_at + 1u + (q - 3u * count);
             }

@@ -52,12 +52,7 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
     vec4.extend(cache.arrival.iter().map(|c| [c.x, c.y, c.z, 0.0]));
     let view_offset = vec4.len() as u32;
     let has_view = cache.has_view();
-    if has_view {
-        vec4.extend((0..n).map(|i| {
-            let v = cache.view(i).unwrap_or(glam::Vec3::ZERO);
-            [v.x, v.y, v.z, 0.0]
-        }));
-    }
+    vec4.extend(cache.view.iter().map(|v| [v.x, v.y, v.z, 0.0]));
     if vec4.is_empty() {
         vec4.push([0.0; 4]);
     }

@@ -370,12 +370,19 @@ pub fn collided_per_unit_chance<D: DensityField>(
     out: &[Vec3],
     unscattered: &[Vec3],
 ) -> Vec3 {
-    let total: Vec3 = out.iter().skip(1).sum();
-    let collided = total - unscattered.iter().skip(1).sum::<Vec3>();
-    if collided == Vec3::ZERO {
-        return collided;
+    let carried = collided(out, unscattered);
+    if carried == Vec3::ZERO {
+        return carried;
     }
-    collided / collision_probability(vol, s_star, x, -n)
+    carried / collision_probability(vol, s_star, x, -n)
+}
+
+/// What one walk carried to its gates `k ≥ 1` through a collision,
+/// `Σ (out_k − unscattered_k)` ([`collided_per_unit_chance`] before the
+/// division by the chance of that collision).
+pub fn collided(out: &[Vec3], unscattered: &[Vec3]) -> Vec3 {
+    let total: Vec3 = out.iter().skip(1).sum();
+    total - unscattered.iter().skip(1).sum::<Vec3>()
 }
 
 /// The optical depth past which [`collision_probability`] stops marching

@@ -62,7 +62,10 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::gated_walk::{accumulate_j_from, collided_per_unit_chance, Clock, GateSettings};
+use super::gated_walk::{
+    accumulate_j_from, collided, collided_per_unit_chance, collision_probability, Clock,
+    GateSettings,
+};
 use super::light_index::LightGrid;
 use super::lights::Lights;
 use super::phase;
@@ -522,18 +525,16 @@ impl InternalLights {
                 let mut view = Vec3::ZERO;
                 if params.view_walks > 0 {
                     let n = (params.eye - x).try_normalize().unwrap_or(Vec3::Z);
+                    // All walks share `x` and `n`, so the chance of a
+                    // collision divides their sum once.
                     for _ in 0..params.view_walks {
                         walk_once(n, &mut rng, &mut per_walk, &mut unscattered);
-                        view += collided_per_unit_chance(
-                            vol,
-                            params.s_star,
-                            x,
-                            n,
-                            &per_walk,
-                            &unscattered,
-                        );
+                        view += collided(&per_walk, &unscattered);
                     }
-                    view /= params.view_walks as f32;
+                    if view != Vec3::ZERO {
+                        view /= params.view_walks as f32
+                            * collision_probability(vol, params.s_star, x, -n);
+                    }
                 }
                 Some(Walked {
                     view,
@@ -874,28 +875,15 @@ impl InternalLights {
         // pass 4 % less time after (what is left is mostly loading the
         // lights' coefficients).
         let width = 3 * self.sh_count;
-        let flat: &[f32] = bytemuck::cast_slice(coeffs);
         let mut sum = [0.0f32; 3 * MAX_COUNT];
         let sum = &mut sum[..width];
-        let mut den = 0.0f32;
-        self.for_each_kernel_slot(p, |slot, k| {
-            let w = k * self.fine_points[slot][3];
-            for (s, &c) in sum.iter_mut().zip(&flat[slot * width..(slot + 1) * width]) {
-                *s += w * c;
-            }
-            den += k;
-        });
+        let den = self.kernel_sum(p, bytemuck::cast_slice(coeffs), sum);
         if den <= 0.0 {
             return Vec3::ZERO;
         }
         let mut y = [0.0f32; MAX_COUNT];
         sh_basis(self.sh_order, n, &mut y);
-        let num = Self::eval_sh(bytemuck::cast_slice(sum), &y);
-        if self.params.renewed {
-            num * (scale_p / den)
-        } else {
-            (num * (scale_p / den)).max(Vec3::ZERO)
-        }
+        self.kernel_average(Self::eval_sh(bytemuck::cast_slice(sum), &y), den, scale_p)
     }
 
     /// Whether the lights carry the view walks' estimates
@@ -920,15 +908,38 @@ impl InternalLights {
         if scale_p <= 0.0 || self.fine_view.is_empty() {
             return Vec3::ZERO;
         }
-        let mut num = Vec3::ZERO;
-        let mut den = 0.0f32;
-        self.for_each_kernel_slot(p, |slot, k| {
-            num += self.fine_view[slot] * (k * self.fine_points[slot][3]);
-            den += k;
-        });
+        let mut sum = [0.0f32; 3];
+        let den = self.kernel_sum(p, bytemuck::cast_slice(&self.fine_view), &mut sum);
         if den <= 0.0 {
             return Vec3::ZERO;
         }
+        self.kernel_average(Vec3::from_array(sum), den, scale_p)
+    }
+
+    /// Adds `K_h(p − x_i) / c_i` times each kernel light's row of `table`
+    /// (rows of `sum.len()` floats, in the fine grid's slot order) to
+    /// `sum` (`1/c_i` the light's reconstruction scale); returns `Σ K_h`.
+    /// The rows are summed unclamped, a contiguous multiply-add the
+    /// compiler vectorises.
+    #[inline]
+    fn kernel_sum(&self, p: Vec3, table: &[f32], sum: &mut [f32]) -> f32 {
+        let width = sum.len();
+        let mut den = 0.0f32;
+        self.for_each_kernel_slot(p, |slot, k| {
+            let w = k * self.fine_points[slot][3];
+            for (s, &c) in sum.iter_mut().zip(&table[slot * width..(slot + 1) * width]) {
+                *s += w * c;
+            }
+            den += k;
+        });
+        den
+    }
+
+    /// The normalised kernel average `num / den` back in `Ĵ` (`scale_p`,
+    /// [`InternalLights::reconstruction_scale`]), clamped at zero unless
+    /// the light sets are renewed ([`InternalParams::renewed`]).
+    #[inline]
+    fn kernel_average(&self, num: Vec3, den: f32, scale_p: f32) -> Vec3 {
         if self.params.renewed {
             num * (scale_p / den)
         } else {
