@@ -46,10 +46,12 @@ struct GateSettings {
 
 // Where a clock budget runs out along a ray (`ClockMarch`): `reached` at
 // ray parameter `value`, or the ray ended first and the clock advanced by
-// `value`.
+// `value`; `rate`: where reached, the clock's rate in the quadrature step
+// there (`march_clock_rate`; one for the geometric clock), zero otherwise.
 struct ClockMarch {
     value: f32,
     reached: bool,
+    rate: f32,
 }
 
 // Advances the clock (gating windows of `s_star`) along `origin + t dir`
@@ -69,12 +71,12 @@ fn march_clock(
     if clock == CLOCK_GEOMETRIC {
         let span = max(t_stop - t0, 0.0);
         if span >= budget {
-            return ClockMarch(t0 + max(budget, 0.0), true);
+            return ClockMarch(t0 + max(budget, 0.0), true, 1.0);
         }
-        return ClockMarch(span, false);
+        return ClockMarch(span, false, 0.0);
     }
     if budget <= 0.0 {
-        return ClockMarch(t0, true);
+        return ClockMarch(t0, true, 0.0);
     }
     let m = scene.medium;
     let cell = (m.majorant_max - m.majorant_min) / vec3<f32>(m.majorant_res);
@@ -108,16 +110,16 @@ fn march_clock(
             let end = min(p1, t_stop);
             let d_tau = c * max(end - p0, 0.0);
             if c > 0.0 && acc + d_tau >= budget {
-                return ClockMarch(min(p0 + (budget - acc) / c, end), true);
+                return ClockMarch(min(p0 + (budget - acc) / c, end), true, c);
             }
             acc += d_tau;
             if p1 >= t_stop {
-                return ClockMarch(acc, false);
+                return ClockMarch(acc, false, 0.0);
             }
             i += 1u;
         }
     }
-    return ClockMarch(acc, false);
+    return ClockMarch(acc, false, 0.0);
 }
 
 // The least `collision_probability` returns (`COLLISION_FLOOR`).

@@ -17,8 +17,9 @@
 // - `internal`: L₁, in the form `gather_params.l1_form` says:
 //   - field (`L1_FIELD`, default): at each point `y`, one scattering of
 //     the reconstructed field `J = S₁ + Ĵ` at `x' = y − r n'`, `n'` drawn
-//     from the phase function and `r` uniform up to where the clock's
-//     budget runs out (`field_l1_at`); the point-light loop is skipped.
+//     from the phase function and `r` up to where the clock's budget
+//     runs out, uniform in the clock (`field_l1_at`); the point-light loop
+//     is skipped.
 //   - points (`L1_POINTS`, the note's eq. 23): one light per sample, a
 //     cluster ∝ P_c / (d_c² + h₁²) and a light ∝ V_i J̄_i, equiangular
 //     sampling of the ray about it. The CPU keeps the clusters' running
@@ -118,6 +119,36 @@ fn clock_to(clock: u32, origin: vec3<f32>, dir: vec3<f32>, t: f32, t_exit: f32) 
     return m.value;
 }
 
+// The clock from the window's start to points of the window asked for
+// from its far end back: the window's clock less the stretch from each
+// point to the one asked for before it (`WindowClock`; each stretch's
+// lattice anchored at its near end).
+struct WindowClock {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    t_exit: f32,
+    // The nearest point asked for so far (the window's end at first) and
+    // the clock from `origin` to it.
+    known_t: f32,
+    known: f32,
+}
+
+fn window_clock_at(w: ptr<function, WindowClock>, t_in: f32) -> f32 {
+    if gather_params.clock == CLOCK_GEOMETRIC {
+        return t_in;
+    }
+    let t = clamp(t_in, 0.0, (*w).known_t);
+    let m = march_clock(
+        gather_params.clock, gather_params.s_star, (*w).origin, (*w).dir, t, (*w).t_exit,
+        (*w).known_t, BIG,
+    );
+    if !m.reached {
+        (*w).known = max((*w).known - m.value, 0.0);
+    }
+    (*w).known_t = t;
+    return (*w).known;
+}
+
 // Distance from `p` to the segment `a + t d`, `t ∈ [0, len]`
 // (`distance_to_segment`).
 fn distance_to_segment(p: vec3<f32>, a: vec3<f32>, d: vec3<f32>, len: f32) -> f32 {
@@ -201,6 +232,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     // The window's end along the ray.
     let wm = march_clock(clock, s_star, x, dir, 0.0, len, len, s_star);
     let window = select(len, wm.value, wm.reached);
+    let window_clock = select(wm.value, s_star, wm.reached);
     if window <= 0.0 {
         return out;
     }
@@ -214,6 +246,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     // part's chances share one march (`ChancesAlongRay`).
     var points = points_along(clock, x, dir, 0.0, window);
     var chances = chances_along_ray(x, dir, len, s_star);
+    var clocks = WindowClock(x, dir, len, window, window_clock);
     for (var jj = 0u; jj < samples; jj++) {
         let j = samples - 1u - jj;
         let ts = segment_sample(&points, (f32(j) + rng_next_f32(rng)) / f32(samples));
@@ -236,7 +269,8 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         if rho > 0.0 {
             s1 = gather_params.scatter * rho * single_scatter_source_at_rate(y, n, TRACKING_RATE, rng);
             if field {
-                l1 = field_l1_at(x, dir, n, t, len, y, rho, rng);
+                let budget = s_star - window_clock_at(&clocks, t);
+                l1 = field_l1_at(n, budget, y, rho, rng);
             }
         }
         if all(j_hat == vec3<f32>(0.0)) && all(l1 == vec3<f32>(0.0)) && all(s1 == vec3<f32>(0.0)) {
@@ -385,24 +419,22 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
 }
 
 // `L₁`'s integrand at the camera-ray point `y = x + t dir` (without
-// `T(x, y)`), one sample: `b(y) ∫ dn' P(n·n') ∫ dr T(y, x') J(x', n')`
-// over the window, with `x' = y − r n'`, `n'` drawn from the phase
-// function and `r` uniformly within the clock's remaining budget, so that
+// `T(x, y)`; `budget_in`: `s*` less the clock from `x` to `y`), one
+// sample: `b(y) ∫ dn' P(n·n') ∫ dr T(y, x') J(x', n')` over the window,
+// with `x' = y − r n'`, `n'` drawn from the phase function and `r` within
+// the clock's remaining budget (uniformly in the clock), so that
 // `d³x' = r² dr dn'` cancels the `1/r²`; with `window_scatters` m > 1 the
 // same step again from `x'` within what is left of the budget, m − 1
 // more times (`field_l1_at`).
 fn field_l1_at(
-    x: vec3<f32>,
-    dir: vec3<f32>,
     n: vec3<f32>,
-    t: f32,
-    len: f32,
+    budget_in: f32,
     y: vec3<f32>,
     rho_y: f32,
     rng: ptr<function, Rng>,
 ) -> vec3<f32> {
     let clock = gather_params.clock;
-    var budget = gather_params.s_star - clock_to(clock, x, dir, t, len);
+    var budget = budget_in;
     let scatters = max(gather_params.window_scatters, 1u);
     var point = y;
     var rho_point = rho_y;
@@ -422,12 +454,31 @@ fn field_l1_at(
             break;
         }
         let exit = bc.t1;
-        let m = march_clock(clock, gather_params.s_star, point, back, 0.0, exit, exit, budget);
-        let r_max = select(exit, m.value, m.reached);
-        if r_max <= 0.0 {
+        // The source's distance `r` and `1/pdf(r)`: uniform up to where the
+        // budget or the box ends (geometric clock), or where a clock drawn
+        // uniformly in `[0, budget]` is reached, `pdf = rate / budget`
+        // (optical depth; past the box's exit: no source).
+        var r = 0.0;
+        var inv_pdf = 0.0;
+        var used = 0.0;
+        if clock == CLOCK_GEOMETRIC {
+            let r_max = min(budget, exit);
+            r = rng_next_f32(rng) * r_max;
+            inv_pdf = r_max;
+            used = r;
+        } else {
+            let c = rng_next_f32(rng) * budget;
+            let m = march_clock(clock, gather_params.s_star, point, back, 0.0, exit, exit, c);
+            if !m.reached || m.rate <= 0.0 {
+                break;
+            }
+            r = m.value;
+            inv_pdf = budget / m.rate;
+            used = c;
+        }
+        if inv_pdf <= 0.0 {
             break;
         }
-        let r = rng_next_f32(rng) * r_max;
         let xp = point + back * r;
         let rho = density(xp);
         var jv = reconstruct_multi(xp, travel, rho, gather_params.multi_offset);
@@ -439,12 +490,12 @@ fn field_l1_at(
             break;
         }
         throughput *= gather_params.scatter * rho_point
-            * transmittance_at_rate(point, back, r, TRACKING_RATE, rng) * r_max;
+            * transmittance_at_rate(point, back, r, TRACKING_RATE, rng) * inv_pdf;
         sum += throughput * jv;
         if !more || all(throughput == vec3<f32>(0.0)) {
             break;
         }
-        budget -= clock_to(clock, point, back, r, exit);
+        budget -= used;
         point = xp;
         rho_point = rho;
         towards = travel;

@@ -413,17 +413,37 @@ pub fn march_clock<D: DensityField>(
     t_stop: f32,
     budget: f32,
 ) -> ClockMarch {
+    march_clock_rate(vol, clock, s_star, origin, dir, t0, t_exit, t_stop, budget).0
+}
+
+/// [`march_clock`], and where the budget was reached the clock's rate
+/// there, `d(clock)/dt` of the quadrature step that holds the point (one
+/// for the geometric clock; zero when the budget is not reached or is not
+/// positive): the density of the points that a budget drawn uniformly
+/// puts along the ray, per unit of the budget's range.
+#[allow(clippy::too_many_arguments)] // march_clock's
+pub fn march_clock_rate<D: DensityField>(
+    vol: &Volume<D>,
+    clock: Clock,
+    s_star: f32,
+    origin: Vec3,
+    dir: Vec3,
+    t0: f32,
+    t_exit: f32,
+    t_stop: f32,
+    budget: f32,
+) -> (ClockMarch, f32) {
     let t_stop = t_stop.min(t_exit);
     if clock == Clock::Geometric {
         let span = (t_stop - t0).max(0.0);
         return if span >= budget {
-            ClockMarch::Reached(t0 + budget.max(0.0))
+            (ClockMarch::Reached(t0 + budget.max(0.0)), 1.0)
         } else {
-            ClockMarch::Exhausted(span)
+            (ClockMarch::Exhausted(span), 0.0)
         };
     }
     if budget <= 0.0 {
-        return ClockMarch::Reached(t0);
+        return (ClockMarch::Reached(t0), 0.0);
     }
     let grid = &vol.majorants;
     let cell = clock_cell(vol);
@@ -450,7 +470,7 @@ pub fn march_clock<D: DensityField>(
             let end = p1.min(t_stop);
             let d_tau = c * (end - p0).max(0.0);
             if c > 0.0 && acc + d_tau >= budget {
-                result = Some(ClockMarch::Reached((p0 + (budget - acc) / c).min(end)));
+                result = Some((ClockMarch::Reached((p0 + (budget - acc) / c).min(end)), c));
                 return false;
             }
             acc += d_tau;
@@ -460,7 +480,7 @@ pub fn march_clock<D: DensityField>(
             i += 1;
         }
     });
-    result.unwrap_or(ClockMarch::Exhausted(acc))
+    result.unwrap_or((ClockMarch::Exhausted(acc), 0.0))
 }
 
 /// Runs one backward walk from `z` along `−n` (`n`: the direction light
