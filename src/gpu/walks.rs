@@ -42,7 +42,10 @@ use super::mirrors::{
 use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
 use crate::physics::gated_walk::Clock;
-use crate::physics::internal::{InternalLight, InternalLights, InternalParams, LightSources};
+use crate::physics::internal::{
+    kernel_radius_for, within_view_reach, InternalLight, InternalLights, InternalParams,
+    LightSources,
+};
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::sh::{sh_count, MAX_ORDER};
 use crate::render::Prepared;
@@ -178,6 +181,13 @@ pub fn build_internal_lights_gpu(
             arrival.iter().map(v3),
             energy.iter().map(v3),
         );
+    }
+    // The GPU walked towards the eye from every light; those out of the
+    // camera's reach take their harmonics' value, as on the CPU.
+    if params.view_walks > 0 {
+        let reach = kernel_radius_for(&prepared.volume, params, &sources.lights);
+        let reached = within_view_reach(&prepared.volume, params, reach, &sources.lights);
+        sources.view_from_harmonics_outside(params.sh_order.min(MAX_ORDER), params.eye, &reached);
     }
     let mut lights_out = InternalLights::assemble(
         &prepared.volume,

@@ -587,7 +587,9 @@ fn field_l1_at<D: DensityField>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::internal::{InternalLight, InternalParams, LightSources};
+    use crate::physics::internal::{
+        within_view_reach, InternalLight, InternalParams, LightSources,
+    };
     use crate::physics::sh::sh_count;
     use crate::physics::volume::Optics;
 
@@ -823,19 +825,42 @@ mod tests {
         let mut y = vec![0.0f32; count];
         let (mut view, mut towards, mut away) = (0.0f64, 0.0f64, 0.0f64);
         let mut diff2 = 0.0f64;
-        for i in 0..cache.len() {
+        // Only the lights within the camera's reach walk towards the eye;
+        // the others hold their harmonics' value there.
+        let reached = within_view_reach(&vol, &params, cache.kernel_radius, &cache.lights);
+        let mut walked = 0usize;
+        for (i, &within) in reached.iter().enumerate() {
             let x = cache.lights[i].position;
             let n = (eye - x).normalize();
             let v = cache.view(i).expect("a view estimate").element_sum() as f64;
             sh_basis(4, n, &mut y);
             let t = cache.eval_scattered_with(i, &y).element_sum() as f64;
+            if !within {
+                // (The harmonics' value unclamped: compared clamped.)
+                let v = cache
+                    .view(i)
+                    .expect("a view estimate")
+                    .max(Vec3::ZERO)
+                    .element_sum() as f64;
+                assert!(
+                    (v - t).abs() <= 1e-5 * t.abs().max(1e-3),
+                    "light {i} out of reach: view {v}, harmonics {t}"
+                );
+                continue;
+            }
+            walked += 1;
             sh_basis(4, -n, &mut y);
             away += cache.eval_scattered_with(i, &y).element_sum() as f64;
             view += v;
             towards += t;
             diff2 += (v - t) * (v - t);
         }
-        let m = cache.len() as f64;
+        assert!(
+            walked > 200 && walked < cache.len(),
+            "{walked} of {} lights within reach: the test needs both kinds",
+            cache.len()
+        );
+        let m = walked as f64;
         let (view, towards, away) = (view / m, towards / m, away / m);
         let se = (diff2 / m - (view - towards).powi(2)).max(0.0).sqrt() / m.sqrt();
         eprintln!("view walks {view:.5}, harmonics towards the eye {towards:.5} (se {se:.5}), away {away:.5}");
@@ -861,6 +886,54 @@ mod tests {
             (got - want).abs().max_element() <= 1e-4 * want.max_element(),
             "reconstruct_view {got}, kernel average {want}"
         );
+    }
+
+    /// A light is within the camera's reach when the clock along its own
+    /// ray from the eye, from the box's entry up to `reach` short of it,
+    /// stays within `s*`: in a cube of extinction 2 seen along −z, at
+    /// `s*` 0.5 and reach 0.1, down to depth 0.35 for the optical-depth
+    /// clock (2 (d − 0.1) ≤ 0.5) and 0.6 for the geometric one; lights
+    /// the ray meets after crossing the box elsewhere count too.
+    #[test]
+    fn view_reach_follows_the_window_along_each_ray() {
+        let vol = cube(2.0, 0.9, 0.0);
+        let at = |depth: f32, x: f32| InternalLight {
+            position: Vec3::new(x, 0.1, 1.0 - depth),
+            density: 1.0,
+            weight: 1.0,
+        };
+        let lights = [
+            at(0.05, 0.0),
+            at(0.3, 0.0),
+            at(0.4, 0.0),
+            at(0.55, 0.3),
+            at(0.65, 0.3),
+            at(1.9, -0.5),
+        ];
+        let eye = Vec3::new(0.0, 0.1, 6.0);
+        for (clock, want) in [
+            (
+                Clock::OpticalDepth,
+                [true, true, false, false, false, false],
+            ),
+            (Clock::Geometric, [true, true, true, true, false, false]),
+        ] {
+            let params = InternalParams {
+                view_walks: 4,
+                eye,
+                ..sh1_params(clock, 0.5, 4, 0.1, L1Form::Field)
+            };
+            let got = within_view_reach(&vol, &params, 0.1, &lights);
+            assert_eq!(got, want, "{clock:?}");
+        }
+        // Seen from the side the same deep light is near the surface.
+        let params = InternalParams {
+            view_walks: 4,
+            eye: Vec3::new(-6.0, 0.1, 1.0 - 1.9),
+            ..sh1_params(Clock::OpticalDepth, 0.5, 4, 0.1, L1Form::Field)
+        };
+        let side = within_view_reach(&vol, &params, 0.1, &[at(1.9, -0.9)]);
+        assert_eq!(side, [true]);
     }
 
     /// One isotropic internal light in a homogeneous cube gathers, on

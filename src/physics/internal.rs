@@ -45,6 +45,15 @@
 //! (README, "Walks towards the eye"). The spherical harmonics still serve
 //! `L₁`, `F` and the gizmos.
 //!
+//! Only the lights within the kernel's reach of the camera rays' windows
+//! run view walks ([`within_view_reach`]): `L₀`'s points lie in those
+//! windows, a clock of `s*` from where the rays enter the box, so the
+//! lights deeper in are never read there. The others keep their
+//! harmonics' value towards the eye. On the puffs at `s*` 0.25 a quarter
+//! of the lights are within reach, so the same time buys four times the
+//! view walks per light read: 64 instead of 16 took the light sets'
+//! variance × time from 190 to 76 %² s (128², M 16384, K 16).
+//!
 //! With the optical-depth clock the walks return `Ĵ_k = c_g(x_i) J^τ_k`
 //! (see [`super::gated_walk`]), and everything below uses `Ĵ` in place of
 //! `J`; `k = 0` is `S₁` for both clocks.
@@ -63,8 +72,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::gated_walk::{
-    accumulate_j_from, collided, collided_per_unit_chance, collision_probability, Clock,
-    GateSettings,
+    accumulate_j_from, collided, collided_per_unit_chance, collision_probability, march_clock,
+    Clock, ClockMarch, GateSettings,
 };
 use super::light_index::LightGrid;
 use super::lights::Lights;
@@ -134,7 +143,9 @@ pub struct InternalParams {
     /// (0: none): an estimate of the collided part of `J_i` in the one
     /// direction the camera sees it in, which `L₀`'s reconstruction then
     /// averages instead of evaluating the lights' spherical harmonics
-    /// ([`InternalLights::reconstruct_view`]).
+    /// ([`InternalLights::reconstruct_view`]). Only lights within the
+    /// camera's reach walk ([`within_view_reach`]); the others use their
+    /// harmonics.
     pub view_walks: u32,
     /// The camera's eye, which the view walks look towards (they make the
     /// lights depend on it: moving the camera re-samples them).
@@ -342,6 +353,111 @@ impl LightSources {
             *e += v;
         }
     }
+
+    /// Sets the view value of each light with `reached[i]` false to its
+    /// harmonics' collided part evaluated towards `eye` (what
+    /// `reconstruct_multi(…, Part::Scattered)` reads of the light for a
+    /// camera ray), instead of view walks it did not run (see
+    /// [`within_view_reach`]). Does nothing without view values.
+    pub fn view_from_harmonics_outside(&mut self, order: u32, eye: Vec3, reached: &[bool]) {
+        let count = sh_count(order);
+        if self.view.len() != self.lights.len()
+            || self.scattered_coeffs.len() < self.lights.len() * count
+        {
+            return;
+        }
+        let mut y = [0.0f32; MAX_COUNT];
+        for (i, light) in self.lights.iter().enumerate() {
+            if reached.get(i).copied().unwrap_or(true) {
+                continue;
+            }
+            let n = (eye - light.position).try_normalize().unwrap_or(Vec3::Z);
+            sh_basis(order, n, &mut y);
+            self.view[i] = self.scattered_coeffs[i * count..(i + 1) * count]
+                .iter()
+                .zip(&y)
+                .map(|(c, &b)| *c * b)
+                .sum();
+        }
+    }
+}
+
+/// The kernel radius `h` of `lights`: [`InternalParams::kernel_radius`],
+/// or by default [`AUTO_KERNEL_FACTOR`] times the mean light spacing
+/// `median(V_i)^{1/3}` (the box's volume per light if no light has a
+/// weight).
+pub fn kernel_radius_for<D: DensityField>(
+    vol: &Volume<D>,
+    params: &InternalParams,
+    lights: &[InternalLight],
+) -> f32 {
+    params.kernel_radius.unwrap_or_else(|| {
+        let m = lights.len().max(1);
+        let mut v: Vec<f32> = lights
+            .iter()
+            .map(|l| l.weight)
+            .filter(|w| *w > 0.0)
+            .collect();
+        let mid = v.len() / 2;
+        let median = if v.is_empty() {
+            let (lo, hi) = vol.bounds;
+            let s = hi - lo;
+            s.x * s.y * s.z / m as f32
+        } else {
+            *v.select_nth_unstable_by(mid, f32::total_cmp).1
+        };
+        AUTO_KERNEL_FACTOR * median.cbrt()
+    })
+}
+
+/// Which lights the camera's `L₀` can read towards the eye, for
+/// [`InternalParams::view_walks`]: light `i` is within reach when the
+/// clock along the ray from the eye through `x_i`, from where that ray
+/// enters the medium's box up to the point `reach` (the kernel radius)
+/// short of `x_i`, stays within `s*` — the light lies within the kernel's
+/// support of its own ray's window. `L₀`'s points lie in the camera rays'
+/// windows, so a light deeper in reaches none of them unless a
+/// neighbouring ray's window ends deeper than its own (a ray that crosses
+/// less medium before it): such a light then gives `L₀` its harmonics'
+/// value ([`LightSources::view_from_harmonics_outside`]), noisier but
+/// of the same quantity. On the puffs, a quarter of the lights are within
+/// reach at `s*` 0.25.
+pub fn within_view_reach<D: DensityField>(
+    vol: &Volume<D>,
+    params: &InternalParams,
+    reach: f32,
+    lights: &[InternalLight],
+) -> Vec<bool> {
+    lights
+        .par_iter()
+        .map(|light| {
+            let d = light.position - params.eye;
+            let dist = d.length();
+            if dist <= 0.0 {
+                return true;
+            }
+            let dir = d / dist;
+            let Some((t_in, t_out)) = vol.clip(params.eye, dir) else {
+                return false;
+            };
+            let t_stop = dist - reach;
+            t_stop <= t_in
+                || matches!(
+                    march_clock(
+                        vol,
+                        params.clock,
+                        params.s_star,
+                        params.eye + dir * t_in,
+                        dir,
+                        0.0,
+                        t_out - t_in,
+                        t_stop - t_in,
+                        params.s_star,
+                    ),
+                    ClockMarch::Exhausted(_)
+                )
+        })
+        .collect()
 }
 
 /// The placement density of the internal lights in `vol` with uniform
@@ -435,6 +551,17 @@ impl InternalLights {
         };
         let walks = params.walks.max(1);
         let tr_estimates = (walks / 4).clamp(4, 64);
+        // The lights whose view walks the camera can read.
+        let reached = if params.view_walks > 0 {
+            within_view_reach(
+                vol,
+                params,
+                kernel_radius_for(vol, params, &lights),
+                &lights,
+            )
+        } else {
+            Vec::new()
+        };
         let scatter = vol.optics.albedo * vol.optics.sigma_t;
         struct Walked {
             view: Vec3,
@@ -523,7 +650,7 @@ impl InternalLights {
                 // Walks towards the eye: the collided part in the one
                 // direction the camera sees, per unit chance.
                 let mut view = Vec3::ZERO;
-                if params.view_walks > 0 {
+                if params.view_walks > 0 && reached[i] {
                     let n = (params.eye - x).try_normalize().unwrap_or(Vec3::Z);
                     // All walks share `x` and `n`, so the chance of a
                     // collision divides their sum once.
@@ -556,6 +683,7 @@ impl InternalLights {
             }
             sources.push(w.f, w.multi, w.scattered, w.arrival, w.energy);
         }
+        sources.view_from_harmonics_outside(order, params.eye, &reached);
         let t_walk = start.elapsed().as_secs_f64();
 
         let mut out = Self::assemble(vol, external, params, sources, density_integral);
@@ -584,26 +712,10 @@ impl InternalLights {
             view,
         } = sources;
         let start = Instant::now();
-        let m = lights.len().max(1);
         let order = params.sh_order.min(MAX_ORDER);
         let count = sh_count(order);
         let scatter = vol.optics.albedo * vol.optics.sigma_t;
-        let kernel_radius = params.kernel_radius.unwrap_or_else(|| {
-            let mut v: Vec<f32> = lights
-                .iter()
-                .map(|l| l.weight)
-                .filter(|w| *w > 0.0)
-                .collect();
-            let mid = v.len() / 2;
-            let median = if v.is_empty() {
-                let (lo, hi) = vol.bounds;
-                let s = hi - lo;
-                s.x * s.y * s.z / m as f32
-            } else {
-                *v.select_nth_unstable_by(mid, f32::total_cmp).1
-            };
-            AUTO_KERNEL_FACTOR * median.cbrt()
-        });
+        let kernel_radius = kernel_radius_for(vol, params, &lights);
         let sigma_grey = vol.optics.sigma_t.max_element();
         let recon_scale: Vec<f32> = lights
             .iter()
