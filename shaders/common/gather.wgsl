@@ -119,36 +119,6 @@ fn clock_to(clock: u32, origin: vec3<f32>, dir: vec3<f32>, t: f32, t_exit: f32) 
     return m.value;
 }
 
-// The clock from the window's start to points of the window asked for
-// from its far end back: the window's clock less the stretch from each
-// point to the one asked for before it (`WindowClock`; each stretch's
-// lattice anchored at its near end).
-struct WindowClock {
-    origin: vec3<f32>,
-    dir: vec3<f32>,
-    t_exit: f32,
-    // The nearest point asked for so far (the window's end at first) and
-    // the clock from `origin` to it.
-    known_t: f32,
-    known: f32,
-}
-
-fn window_clock_at(w: ptr<function, WindowClock>, t_in: f32) -> f32 {
-    if gather_params.clock == CLOCK_GEOMETRIC {
-        return t_in;
-    }
-    let t = clamp(t_in, 0.0, (*w).known_t);
-    let m = march_clock(
-        gather_params.clock, gather_params.s_star, (*w).origin, (*w).dir, t, (*w).t_exit,
-        (*w).known_t, BIG,
-    );
-    if !m.reached {
-        (*w).known = max((*w).known - m.value, 0.0);
-    }
-    (*w).known_t = t;
-    return (*w).known;
-}
-
 // Distance from `p` to the segment `a + t d`, `t ∈ [0, len]`
 // (`distance_to_segment`).
 fn distance_to_segment(p: vec3<f32>, a: vec3<f32>, d: vec3<f32>, len: f32) -> f32 {
@@ -232,7 +202,6 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     // The window's end along the ray.
     let wm = march_clock(clock, s_star, x, dir, 0.0, len, len, s_star);
     let window = select(len, wm.value, wm.reached);
-    let window_clock = select(wm.value, s_star, wm.reached);
     if window <= 0.0 {
         return out;
     }
@@ -246,7 +215,6 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     // part's chances share one march (`ChancesAlongRay`).
     var points = points_along(clock, x, dir, 0.0, window);
     var chances = chances_along_ray(x, dir, len, s_star);
-    var clocks = WindowClock(x, dir, len, window, window_clock);
     for (var jj = 0u; jj < samples; jj++) {
         let j = samples - 1u - jj;
         let ts = segment_sample(&points, (f32(j) + rng_next_f32(rng)) / f32(samples));
@@ -269,7 +237,9 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         if rho > 0.0 {
             s1 = gather_params.scatter * rho * single_scatter_source_at_rate(y, n, TRACKING_RATE, rng);
             if field {
-                let budget = s_star - window_clock_at(&clocks, t);
+                // (The CPU marches once for all the points' clocks,
+                // `clock_at_each`: the same lattice from `x`.)
+                let budget = s_star - clock_to(clock, x, dir, t, len);
                 l1 = field_l1_at(n, budget, y, rho, rng);
             }
         }

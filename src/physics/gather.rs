@@ -62,7 +62,9 @@
 
 use glam::Vec3;
 
-use super::gated_walk::{march_clock, march_clock_rate, ChancesAlongRay, Clock, ClockMarch};
+use super::gated_walk::{
+    clock_at_each, march_clock, march_clock_rate, ChancesAlongRay, Clock, ClockMarch,
+};
 use super::internal::{InternalLights, L1Form, Part};
 use super::lights::Lights;
 use super::phase;
@@ -85,6 +87,10 @@ use super::volume::{DensityField, Volume};
 /// walks keep rate 1: their noise is their paths' (README, "Where the
 /// noise comes from").
 pub const TRACKING_RATE: f32 = 8.0;
+
+/// The most stratified points per camera ray ([`gather`]'s `samples`;
+/// the scene's `light_samples` is validated against it).
+pub const MAX_GATHER_POINTS: usize = 256;
 
 /// One gather estimate, by part.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -220,75 +226,6 @@ fn points_along<D: DensityField>(
     }
 }
 
-/// The clock from the window's start `x` to points of the window asked
-/// for from its far end back, as the gather visits its strata: the
-/// window's clock less the stretch from each point to the one asked for
-/// before it, so that a window's points cost one march over the window in
-/// all (`L₁`'s budget at each point had cost a march from `x` each, an
-/// eighth of the gather's time on the puffs). Each stretch's quadrature
-/// lattice is anchored at its near end, as [`ChancesAlongRay`]'s are: the
-/// values agree with a march from `x` to the quadrature's second order,
-/// not bit for bit.
-struct WindowClock {
-    origin: Vec3,
-    dir: Vec3,
-    t_exit: f32,
-    s_star: f32,
-    clock: Clock,
-    /// The nearest point asked for so far (the window's end at first) and
-    /// the clock from `origin` to it.
-    known_t: f32,
-    known: f32,
-}
-
-impl WindowClock {
-    /// The window of `origin + t dir` ends at `window`, where the clock
-    /// reads `window_clock`.
-    fn new(
-        origin: Vec3,
-        dir: Vec3,
-        t_exit: f32,
-        s_star: f32,
-        clock: Clock,
-        window: f32,
-        window_clock: f32,
-    ) -> Self {
-        Self {
-            origin,
-            dir,
-            t_exit,
-            s_star,
-            clock,
-            known_t: window,
-            known: window_clock,
-        }
-    }
-
-    /// The clock from `origin` to `origin + t dir`; a `t` past one asked
-    /// for before counts as that one.
-    fn at<D: DensityField>(&mut self, vol: &Volume<D>, t: f32) -> f32 {
-        if self.clock == Clock::Geometric {
-            return t;
-        }
-        let t = t.clamp(0.0, self.known_t);
-        if let ClockMarch::Exhausted(d) = march_clock(
-            vol,
-            self.clock,
-            self.s_star,
-            self.origin,
-            self.dir,
-            t,
-            self.t_exit,
-            self.known_t,
-            f32::INFINITY,
-        ) {
-            self.known = (self.known - d).max(0.0);
-        }
-        self.known_t = t;
-        self.known
-    }
-}
-
 /// Distance from `p` to the segment `a + t d`, `t ∈ [0, len]` (`d` unit).
 #[inline]
 fn distance_to_segment(p: Vec3, a: Vec3, d: Vec3, len: f32) -> f32 {
@@ -316,30 +253,50 @@ pub fn gather<D: DensityField>(
     let len = t_out - t_in;
     let s_star = cache.s_star;
     let clock = cache.params.clock;
-    // The window's end along the ray, and the clock there.
-    let (window, window_clock) =
-        match march_clock(vol, clock, s_star, x, dir, 0.0, len, len, s_star) {
-            ClockMarch::Reached(t) => (t, s_star),
-            ClockMarch::Exhausted(d) => (len, d),
-        };
+    // The window's end along the ray.
+    let window = match march_clock(vol, clock, s_star, x, dir, 0.0, len, len, s_star) {
+        ClockMarch::Reached(t) => t,
+        ClockMarch::Exhausted(_) => len,
+    };
     if window <= 0.0 {
         return out;
     }
     let n = -dir;
 
     let field = cache.params.l1 == L1Form::Field;
-    let samples = samples.max(1);
+    let samples = samples.clamp(1, MAX_GATHER_POINTS as u32);
     // L₀ (both parts) and, for the field form, L₁: stratified points of
-    // the window, ratio-tracked transmittance from `x`.
+    // the window, ratio-tracked transmittance from `x`; for `L₁`'s budget
+    // the clock at each point from `x`, all in one march
+    // ([`clock_at_each`]).
+    let n_points = samples as usize;
+    let points = points_along(vol, clock, x, dir, 0.0, window);
+    let mut ts = [0.0f32; MAX_GATHER_POINTS];
+    let mut steps = [0.0f32; MAX_GATHER_POINTS];
+    for j in 0..n_points {
+        let (t, inv_pdf) = points.sample((j as f32 + rng.next_f32()) / samples as f32);
+        ts[j] = t;
+        steps[j] = inv_pdf / samples as f32;
+    }
+    let mut clocks = [0.0f32; MAX_GATHER_POINTS];
+    if field {
+        clock_at_each(
+            vol,
+            clock,
+            s_star,
+            x,
+            dir,
+            len,
+            &ts[..n_points],
+            &mut clocks,
+        );
+    }
     // The strata are visited from the window's far end back, so that the
     // collided part's chances of a collision share one march
     // ([`ChancesAlongRay`]).
-    let points = points_along(vol, clock, x, dir, 0.0, window);
     let mut chances = ChancesAlongRay::new(x, dir, len, s_star);
-    let mut clocks = WindowClock::new(x, dir, len, s_star, clock, window, window_clock);
-    for j in (0..samples).rev() {
-        let (t, inv_pdf) = points.sample((j as f32 + rng.next_f32()) / samples as f32);
-        let step = inv_pdf / samples as f32;
+    for j in (0..n_points).rev() {
+        let (t, step) = (ts[j], steps[j]);
         let y = x + dir * t;
         let rho = vol.density.density(y);
         let mut j_hat = if cache.has_view() {
@@ -355,7 +312,7 @@ pub fn gather<D: DensityField>(
                 * rho
                 * single_scatter_source_at_rate(vol, lights, y, n, TRACKING_RATE, rng);
             let l1 = if field {
-                let budget = s_star - clocks.at(vol, t);
+                let budget = s_star - clocks[j];
                 field_l1_at(vol, lights, cache, n, budget, y, rho, rng)
             } else {
                 Vec3::ZERO

@@ -406,10 +406,11 @@ impl InternalSettings {
                 format!("{} must lie in [0, 1]", self.uniform_mix),
             );
         }
-        if self.light_samples == 0 || self.light_samples > 256 {
+        let most = crate::physics::gather::MAX_GATHER_POINTS as u32;
+        if self.light_samples == 0 || self.light_samples > most {
             return bad(
                 "light_samples",
-                format!("{} must lie in 1..=256", self.light_samples),
+                format!("{} must lie in 1..={most}", self.light_samples),
             );
         }
         if self.view_walks > MAX_WALKS {
