@@ -147,6 +147,21 @@ pub fn time_to(curve: &[Checkpoint], target: f32) -> Option<f64> {
     Some(a.secs + f.clamp(0.0, 1.0) * (b.secs - a.secs))
 }
 
+/// Whether `spp` passes reach the next checkpoint of the sequence
+/// 1, 2, 3, 4, 6, 8, 11, 16, 23, 32, … (`√2^k` rounded), `next` being
+/// the unrounded next one; moves `next` past `spp` when it does. (It
+/// once skipped 3 and 6 by rounding down, which left a slow renderer's
+/// third pass, where its curve crosses the target, unrecorded.)
+fn checkpoint_due(next: &mut f64, spp: u32) -> bool {
+    if (spp as f64) < next.round() {
+        return false;
+    }
+    while next.round() <= spp as f64 {
+        *next *= std::f64::consts::SQRT_2;
+    }
+    true
+}
+
 /// Renders progressively with `settings` for at most `budget` (and at most
 /// `max_spp` passes), recording a checkpoint whenever the sample count
 /// reaches the next of 1, 2, 3, 4, 6, 8, 11, 16, … (factor ≈ √2).
@@ -178,10 +193,7 @@ fn curve(
         elapsed += start.elapsed();
         let spp = pass + 1;
         let last = elapsed >= budget || spp == max_spp;
-        if spp as f64 >= next.floor() || last {
-            while next.floor() <= spp as f64 {
-                next *= std::f64::consts::SQRT_2;
-            }
+        if checkpoint_due(&mut next, spp) || last {
             let rmse = rmse_against(&film.mean(), converged, converged_var);
             out.push(Checkpoint {
                 secs: elapsed.as_secs_f64(),
@@ -444,6 +456,16 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Checkpoints at 1, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64 passes.
+    #[test]
+    fn checkpoints_follow_root_two_rounded() {
+        let mut next = 1.0f64;
+        let due: Vec<u32> = (1..=64)
+            .filter(|&spp| checkpoint_due(&mut next, spp))
+            .collect();
+        assert_eq!(due, [1, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64]);
+    }
 
     #[test]
     fn converged_noise_is_removed_from_the_rmse() {
