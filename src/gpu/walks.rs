@@ -143,11 +143,7 @@ pub fn build_internal_lights_gpu(
     }
     // Refuse before any work if the results cannot be bound.
     let n_ext = prepared.lights.suns.len() + prepared.lights.points.len();
-    let stride = 3 * sh_count(params.sh_order.min(MAX_ORDER))
-        + n_ext
-        + params.terms as usize
-        + 1
-        + usize::from(params.view_walks > 0);
+    let stride = record_stride(params, n_ext) as usize;
     ctx.check_storage_size(
         "internal-light walk results",
         params.lights.max(1) as u64 * stride as u64 * 16,
@@ -199,6 +195,15 @@ pub fn build_internal_lights_gpu(
     lights_out.timings.placement = t_place;
     lights_out.timings.walks = t_walk;
     Ok(lights_out)
+}
+
+/// The vec4 per light of the walks' output (see
+/// `shaders/walks/main.wgsl`): the three SH sets, the arrival from each of
+/// `n_ext` external lights, the energies of `k = 1..=N` after `E_0`, and
+/// with view walks their value.
+fn record_stride(params: &InternalParams, n_ext: usize) -> u32 {
+    let count = sh_count(params.sh_order.min(MAX_ORDER)) as u32;
+    3 * count + n_ext as u32 + params.terms + 1 + u32::from(params.view_walks > 0)
 }
 
 /// A uniform buffer holding `value`.
@@ -348,7 +353,7 @@ fn walk(
     let order = params.sh_order.min(MAX_ORDER);
     let count = sh_count(order) as u32;
     let n_ext = (prepared.lights.suns.len() + prepared.lights.points.len()) as u32;
-    let stride = 3 * count + n_ext + params.terms + 1 + u32::from(params.view_walks > 0);
+    let stride = record_stride(params, n_ext as usize);
     let walks = params.walks.max(1);
     let out_bytes = build.light_count as u64 * stride as u64 * 16;
     ctx.check_storage_size("internal-light walk results", out_bytes)?;

@@ -416,6 +416,46 @@ pub fn march_clock<D: DensityField>(
     march_clock_rate(vol, clock, s_star, origin, dir, t0, t_exit, t_stop, budget).0
 }
 
+/// The optical-depth clock's midpoint lattice along `origin + t dir` from
+/// `t0` to `t_exit`: in each majorant cell `[a, b]` the ray crosses, steps
+/// `[a + i h, a + (i+1) h)` cut at `b` ([`clock_step`]), each passed to
+/// `step(p0, p1, c)` with `c` the grey extinction at its midpoint; a cell
+/// whose majorant is zero is one step of rate zero. Stops when `step`
+/// returns false. What [`march_clock_rate`] and [`clock_at_each`] count.
+#[inline]
+fn clock_steps<D: DensityField>(
+    vol: &Volume<D>,
+    s_star: f32,
+    origin: Vec3,
+    dir: Vec3,
+    t0: f32,
+    t_exit: f32,
+    mut step: impl FnMut(f32, f32, f32) -> bool,
+) {
+    let cell = clock_cell(vol);
+    let sigma_g = vol.optics.sigma_t.max_element();
+    vol.majorants.walk(origin, dir, t0, t_exit, |a, b, m| {
+        if m <= 0.0 {
+            // The majorant bounds ρ: nothing to count in this cell.
+            return step(a, b, 0.0);
+        }
+        let h = clock_step(cell, m, s_star);
+        let mut i = 0u32;
+        loop {
+            let p0 = a + i as f32 * h;
+            if p0 >= b {
+                return true;
+            }
+            let p1 = (a + (i + 1) as f32 * h).min(b);
+            let c = sigma_g * vol.density.density(origin + dir * (0.5 * (p0 + p1)));
+            if !step(p0, p1, c) {
+                return false;
+            }
+            i += 1;
+        }
+    });
+}
+
 /// [`march_clock`], and where the budget was reached the clock's rate
 /// there, `d(clock)/dt` of the quadrature step that holds the point (one
 /// for the geometric clock; zero when the budget is not reached or is not
@@ -445,40 +485,20 @@ pub fn march_clock_rate<D: DensityField>(
     if budget <= 0.0 {
         return (ClockMarch::Reached(t0), 0.0);
     }
-    let grid = &vol.majorants;
-    let cell = clock_cell(vol);
-    let sigma_g = vol.optics.sigma_t.max_element();
     let mut acc = 0.0f32;
     let mut result = None;
-    grid.walk(origin, dir, t0, t_exit, |a, b, m| {
-        if a >= t_stop {
+    clock_steps(vol, s_star, origin, dir, t0, t_exit, |p0, p1, c| {
+        if p0 >= t_stop {
             return false;
         }
-        if m <= 0.0 {
-            // The majorant bounds ρ: nothing to count in this cell.
-            return b < t_stop;
+        let end = p1.min(t_stop);
+        let d_tau = c * (end - p0).max(0.0);
+        if c > 0.0 && acc + d_tau >= budget {
+            result = Some((ClockMarch::Reached((p0 + (budget - acc) / c).min(end)), c));
+            return false;
         }
-        let h = clock_step(cell, m, s_star);
-        let mut i = 0u32;
-        loop {
-            let p0 = a + i as f32 * h;
-            if p0 >= b {
-                return true;
-            }
-            let p1 = (a + (i + 1) as f32 * h).min(b);
-            let c = sigma_g * vol.density.density(origin + dir * (0.5 * (p0 + p1)));
-            let end = p1.min(t_stop);
-            let d_tau = c * (end - p0).max(0.0);
-            if c > 0.0 && acc + d_tau >= budget {
-                result = Some((ClockMarch::Reached((p0 + (budget - acc) / c).min(end)), c));
-                return false;
-            }
-            acc += d_tau;
-            if p1 >= t_stop {
-                return false;
-            }
-            i += 1;
-        }
+        acc += d_tau;
+        p1 < t_stop
     });
     result.unwrap_or((ClockMarch::Exhausted(acc), 0.0))
 }
@@ -510,41 +530,15 @@ pub fn clock_at_each<D: DensityField>(
         }
         return;
     }
-    let cell = clock_cell(vol);
-    let sigma_g = vol.optics.sigma_t.max_element();
     let mut acc = 0.0f32;
     let mut k = 0usize;
-    vol.majorants.walk(origin, dir, 0.0, t_exit, |a, b, m| {
-        while k < n && ts[k] <= a {
-            out[k] = acc;
+    clock_steps(vol, s_star, origin, dir, 0.0, t_exit, |p0, p1, c| {
+        while k < n && ts[k] <= p1 {
+            out[k] = acc + c * (ts[k] - p0).max(0.0);
             k += 1;
         }
-        if k >= n {
-            return false;
-        }
-        if m <= 0.0 {
-            // The majorant bounds ρ: nothing to count in this cell.
-            return true;
-        }
-        let h = clock_step(cell, m, s_star);
-        let mut i = 0u32;
-        loop {
-            let p0 = a + i as f32 * h;
-            if p0 >= b {
-                return true;
-            }
-            let p1 = (a + (i + 1) as f32 * h).min(b);
-            let c = sigma_g * vol.density.density(origin + dir * (0.5 * (p0 + p1)));
-            while k < n && ts[k] <= p1 {
-                out[k] = acc + c * (ts[k] - p0).max(0.0);
-                k += 1;
-            }
-            acc += c * (p1 - p0);
-            if k >= n {
-                return false;
-            }
-            i += 1;
-        }
+        acc += c * (p1 - p0);
+        k < n
     });
     for o in &mut out[k..n] {
         *o = acc;

@@ -373,11 +373,8 @@ impl LightSources {
             }
             let n = (eye - light.position).try_normalize().unwrap_or(Vec3::Z);
             sh_basis(order, n, &mut y);
-            self.view[i] = self.scattered_coeffs[i * count..(i + 1) * count]
-                .iter()
-                .zip(&y)
-                .map(|(c, &b)| *c * b)
-                .sum();
+            self.view[i] =
+                InternalLights::eval_sh(&self.scattered_coeffs[i * count..(i + 1) * count], &y);
         }
     }
 }
