@@ -192,6 +192,12 @@ fn chance_at(c: ptr<function, ChancesAlongRay>, t_in: f32) -> f32 {
 // reset at the start of each walk.
 var<private> walk_unscattered: vec3<f32>;
 
+// When true, `accumulate_j_from` adds only what the walk carries through a
+// collision and skips the shadow rays of the gates before its first one
+// (`accumulate_collided`: the walks towards the eye, which discard that
+// part); `walk_unscattered` then stays zero. Set per walk by the caller.
+var<private> walk_collided_only: bool;
+
 // Probability that a walk's direction after a collision is drawn towards an
 // external light rather than from the phase function, and the
 // Henyey–Greenstein parameter of those lobes (`GUIDE_PROBABILITY`,
@@ -279,7 +285,8 @@ fn guided_direction(
 // One gate of `accumulate_j_from` (its `on_gate` closure): adds
 // `w · α σ_t · ρ · (S₁/b)(z_k, n_k)` to term `k`, with `ρ = ρ(z_k)` for the
 // geometric clock and `ρ(z)` for the optical-depth clock, and to
-// `walk_unscattered` too if the walk has not collided yet.
+// `walk_unscattered` too if the walk has not collided yet (nothing before
+// the first collision, and no shadow ray, with `walk_collided_only`).
 fn gate_add(
     k: u32,
     w: vec3<f32>,
@@ -296,7 +303,7 @@ fn gate_add(
     if settings.clock == CLOCK_GEOMETRIC {
         rho = density(zk);
     }
-    if k < first || rho <= 0.0 || all(w == vec3<f32>(0.0)) {
+    if k < first || rho <= 0.0 || all(w == vec3<f32>(0.0)) || (walk_collided_only && !scattered) {
         return;
     }
     let scatter = scene.medium.albedo * scene.medium.sigma_t;

@@ -140,6 +140,8 @@ fn walk_lights(
         }
         var walk_rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_PASS + 1u + w);
         let settings = GateSettings(wp.s_star, terms, wp.clock, wp.rr_start);
+        // The walks towards the eye keep only the collided part.
+        walk_collided_only = towards_eye;
         accumulate_j_from(x, n, settings, 1u, &walk_rng, &per_walk);
     }
     var total = vec3<f32>(0.0);

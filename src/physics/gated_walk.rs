@@ -641,11 +641,6 @@ pub fn accumulate_j_guided<D: DensityField>(
     out: &mut [Vec3],
     mut unscattered: Option<&mut [Vec3]>,
 ) {
-    let scatter = vol.optics.albedo * vol.optics.sigma_t;
-    let rho_z = vol.density.density(z);
-    if settings.clock == Clock::OpticalDepth && rho_z <= 0.0 {
-        return;
-    }
     let gates = match &unscattered {
         Some(u) => out.len().min(u.len()),
         None => out.len(),
@@ -658,27 +653,99 @@ pub fn accumulate_j_guided<D: DensityField>(
         n_terms: (gates - 1) as u32,
         ..*settings
     };
-    walk(
+    gate_sources(
         vol,
+        lights,
         z,
         n,
         &limited,
-        guided.then_some(lights),
+        first,
+        guided,
+        false,
         rng,
-        |k, w, zk, nk, scattered, rng| {
-            let rho = match settings.clock {
-                Clock::Geometric => vol.density.density(zk),
-                Clock::OpticalDepth => rho_z,
-            };
-            if k < first || rho <= 0.0 || w == Vec3::ZERO {
-                return;
-            }
-            let source = single_scatter_source(vol, lights, zk, nk, rng);
-            let v = w * scatter * rho * source;
+        |k, v, scattered| {
             out[k as usize] += v;
             if let (false, Some(u)) = (scattered, unscattered.as_deref_mut()) {
                 u[k as usize] += v;
             }
+        },
+    );
+}
+
+/// What one guided walk from `z` carried to its gates `k = 1..=N` through
+/// a collision: [`collided`] of [`accumulate_j_from`]'s two outputs (the
+/// same estimator), without the shadow rays of the gates it passes before
+/// its first collision, whose share that difference removes again. The
+/// walks towards the eye need nothing else (on the puffs at `s* = 0.25`,
+/// 128 of them per light within reach, they took 0.86 s of a light set's
+/// 1.75 s).
+pub fn accumulate_collided<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    rng: &mut Rng,
+) -> Vec3 {
+    let mut sum = Vec3::ZERO;
+    gate_sources(
+        vol,
+        lights,
+        z,
+        n,
+        settings,
+        1,
+        true,
+        true,
+        rng,
+        |_, v, _| sum += v,
+    );
+    sum
+}
+
+/// The walk behind [`accumulate_j_guided`] and [`accumulate_collided`]:
+/// calls `add(k, v, scattered)` with each gate's `v = w · α σ_t · ρ ·
+/// (S₁/b)(z_k, n_k)` for `k ≥ first` (`scattered`: the walk collided
+/// before the gate); with `collided_only`, gates before the first
+/// collision are skipped without their shadow rays.
+#[allow(clippy::too_many_arguments)] // accumulate_j_guided's and the switch
+fn gate_sources<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    first: u32,
+    guided: bool,
+    collided_only: bool,
+    rng: &mut Rng,
+    mut add: impl FnMut(u32, Vec3, bool),
+) {
+    let scatter = vol.optics.albedo * vol.optics.sigma_t;
+    let rho_z = vol.density.density(z);
+    if settings.clock == Clock::OpticalDepth && rho_z <= 0.0 {
+        return;
+    }
+    walk(
+        vol,
+        z,
+        n,
+        settings,
+        guided.then_some(lights),
+        rng,
+        |k, w, zk, nk, scattered, rng| {
+            if k < first || w == Vec3::ZERO || (collided_only && !scattered) {
+                return;
+            }
+            let rho = match settings.clock {
+                Clock::Geometric => vol.density.density(zk),
+                Clock::OpticalDepth => rho_z,
+            };
+            if rho <= 0.0 {
+                return;
+            }
+            let source = single_scatter_source(vol, lights, zk, nk, rng);
+            add(k, w * scatter * rho * source, scattered);
         },
         None,
     );
@@ -1314,6 +1381,88 @@ mod tests {
             v1.x.sqrt()
         );
         assert!(v1.x < v0.x, "guided variance {} against {}", v1.x, v0.x);
+    }
+
+    /// [`accumulate_collided`] skips the shadow rays of the gates before
+    /// the first collision and keeps the estimator: in the medium of
+    /// `guided_walks_keep_the_mean`, its mean agrees per channel with
+    /// [`collided`] of [`accumulate_j_from`]'s outputs within 4.5 standard
+    /// errors of the difference, and both are far from the uncollided
+    /// part it leaves out (which would show if it kept or lost a share).
+    #[test]
+    fn collided_walks_match_the_collided_part() {
+        let mut vol = boxed(1.2, 0.8, 0.95, 1.0, 4);
+        vol.optics.g = 0.6;
+        let lights = Lights {
+            suns: vec![crate::physics::lights::Sun {
+                direction: Vec3::new(0.6, -1.0, -0.5).normalize(),
+                irradiance: Vec3::new(3.0, 2.0, 1.0),
+            }],
+            points: Vec::new(),
+        };
+        let settings = GateSettings {
+            s_star: 0.5,
+            n_terms: 40,
+            clock: Clock::OpticalDepth,
+            rr_start: crate::physics::reference::RR_START_DEPTH,
+        };
+        let z = Vec3::new(0.1, -0.4, 0.2);
+        let n = Vec3::new(0.3, 0.2, -1.0).normalize();
+        let walks = 200_000u32;
+        let stats = |f: &mut dyn FnMut(&mut Rng) -> Vec3, stream: u32| {
+            let (mut sum, mut sum2) = (Vec3::ZERO, Vec3::ZERO);
+            for w in 0..walks {
+                let mut rng = Rng::for_sample(23, w, stream);
+                let v = f(&mut rng);
+                sum += v;
+                sum2 += v * v;
+            }
+            let mean = sum / walks as f32;
+            (
+                mean,
+                (sum2 / walks as f32 - mean * mean).max(Vec3::ZERO) / walks as f32,
+            )
+        };
+        let mut uncollided = Vec3::ZERO;
+        let (full, full_var) = stats(
+            &mut |rng| {
+                let mut out = vec![Vec3::ZERO; settings.gate_count()];
+                let mut unscattered = vec![Vec3::ZERO; settings.gate_count()];
+                accumulate_j_from(
+                    &vol,
+                    &lights,
+                    z,
+                    n,
+                    &settings,
+                    1,
+                    rng,
+                    &mut out,
+                    Some(&mut unscattered),
+                );
+                uncollided += unscattered[1..].iter().sum::<Vec3>();
+                collided(&out, &unscattered)
+            },
+            0,
+        );
+        uncollided /= walks as f32;
+        let (skip, skip_var) = stats(
+            &mut |rng| accumulate_collided(&vol, &lights, z, n, &settings, rng),
+            1,
+        );
+        eprintln!("collided {full} (with every gate), {skip} (skipping), uncollided {uncollided}");
+        for c in 0..3 {
+            let se = (full_var[c] + skip_var[c]).sqrt();
+            assert!(
+                (full[c] - skip[c]).abs() < 4.5 * se,
+                "channel {c}: with every gate {} skipping {} (se {se})",
+                full[c],
+                skip[c]
+            );
+            assert!(
+                uncollided[c] > 10.0 * se,
+                "channel {c}: the test cannot tell a lost share"
+            );
+        }
     }
 
     #[test]

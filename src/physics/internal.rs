@@ -36,7 +36,10 @@
 //! angular size `h / |eye − x_i|` for the rays through its support. With
 //! `view_walks` `K_v > 0` each light also runs `K_v` walks from `x_i` along
 //! `−n_i` and keeps the mean of their collided part per unit chance
-//! ([`Part::Scattered`]) as one RGB value; `L₀`'s reconstruction averages
+//! ([`Part::Scattered`]) as one RGB value (walked by
+//! [`accumulate_collided`], which skips the shadow rays of the gates
+//! before a walk's first collision: 7 % of a light set's time on the
+//! puffs, the estimator unchanged); `L₀`'s reconstruction averages
 //! those ([`InternalLights::reconstruct_view`]). Evaluating an order-`L`
 //! series projected from `K` walks in spread directions has about `(L+1)²`
 //! times the variance of a walk's value in the one direction it
@@ -72,8 +75,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::gated_walk::{
-    accumulate_j_from, collided, collided_per_unit_chance, collision_probability, march_clock,
-    Clock, ClockMarch, GateSettings,
+    accumulate_collided, accumulate_j_from, collided_per_unit_chance, collision_probability,
+    march_clock, Clock, ClockMarch, GateSettings,
 };
 use super::light_index::LightGrid;
 use super::lights::Lights;
@@ -652,8 +655,7 @@ impl InternalLights {
                     // All walks share `x` and `n`, so the chance of a
                     // collision divides their sum once.
                     for _ in 0..params.view_walks {
-                        walk_once(n, &mut rng, &mut per_walk, &mut unscattered);
-                        view += collided(&per_walk, &unscattered);
+                        view += accumulate_collided(vol, external, x, n, &gate, &mut rng);
                     }
                     if view != Vec3::ZERO {
                         view /= params.view_walks as f32
