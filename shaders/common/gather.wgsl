@@ -38,13 +38,13 @@
 // times the majorant (`TRACKING_RATE` in src/physics/gather.rs).
 const TRACKING_RATE: f32 = 8.0;
 
-const SEGMENT_PIECES: u32 = 8u;
+const SEGMENT_PIECES: u32 = 16u;
 const SEGMENT_DEFENSIVE: f32 = 0.1;
 
 struct SegmentPdf {
     t0: f32,
     width: f32,
-    prob: array<f32, 8>,
+    prob: array<f32, SEGMENT_PIECES>,
 }
 
 // `SegmentPdf::uniform` over `[t0, t1]`.
@@ -66,7 +66,7 @@ fn points_along(clock: u32, origin: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32)
         return pdf;
     }
     let sigma_g = max_element(scene.medium.sigma_t);
-    var stopped: array<f32, 8>;
+    var stopped: array<f32, SEGMENT_PIECES>;
     var tau = 0.0;
     var total = 0.0;
     var c_a = sigma_g * density(origin + dir * t0);

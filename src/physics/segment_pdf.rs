@@ -24,8 +24,12 @@ use glam::Vec3;
 
 use super::volume::{DensityField, Volume};
 
-/// Pieces a stretch is cut into.
-pub const PIECES: usize = 8;
+/// Pieces a stretch is cut into. Sixteen rather than eight since the
+/// gather takes 32 points per ray: on the puffs at 256² (`lantern noise`,
+/// M 16384, K 16, `K_v` 128, `s*` 0.25) the gather's noise per pass 5.2 →
+/// 5.1 % of the image mean (reconstructed part 2.5 → 2.3 %) at the same
+/// time per pass, variance × time 73 → 69 %² s (32 pieces: 68).
+pub const PIECES: usize = 16;
 
 /// The uniform share of the density, which keeps every point of the
 /// stretch reachable however the extinction read at the pieces' middles
