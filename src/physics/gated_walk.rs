@@ -1308,14 +1308,10 @@ mod tests {
         (chi2, bins - 1)
     }
 
-    /// Guiding the walks towards the light changes their spread, not their
-    /// mean: in a bounded, forward-scattering, heterogeneous medium lit by
-    /// a sun and a point light, the collided part of every term agrees
-    /// with the unguided walk's (summed over `k ≥ 1`, per channel, within
-    /// 4.5 standard errors of the difference), and the guided walks' values
-    /// are less spread (their standard error lower).
-    #[test]
-    fn guided_walks_keep_the_mean() {
+    /// A bounded, forward-scattering (`g` 0.6), heterogeneous medium lit by
+    /// a sun, the optical-depth clock at `s*` 0.5 with 40 terms, and a walk's
+    /// start `z` and direction `n` inside it.
+    fn forward_scattering_walk() -> (Volume<Field>, Lights, GateSettings, Vec3, Vec3) {
         let mut vol = boxed(1.2, 0.8, 0.95, 1.0, 4);
         vol.optics.g = 0.6;
         let lights = Lights {
@@ -1323,10 +1319,7 @@ mod tests {
                 direction: Vec3::new(0.6, -1.0, -0.5).normalize(),
                 irradiance: Vec3::new(3.0, 2.0, 1.0),
             }],
-            points: vec![crate::physics::lights::PointLight {
-                position: Vec3::new(-2.0, 0.5, 1.5),
-                intensity: Vec3::splat(4.0),
-            }],
+            points: Vec::new(),
         };
         let settings = GateSettings {
             s_star: 0.5,
@@ -1336,34 +1329,81 @@ mod tests {
         };
         let z = Vec3::new(0.1, -0.4, 0.2);
         let n = Vec3::new(0.3, 0.2, -1.0).normalize();
-        let walks = 400_000u32;
-        let mut stats = Vec::new();
-        for guided in [false, true] {
-            let (mut sum, mut sum2) = (Vec3::ZERO, Vec3::ZERO);
-            for w in 0..walks {
-                let mut rng = Rng::for_sample(21, w, u32::from(guided));
-                let mut out = vec![Vec3::ZERO; settings.gate_count()];
-                let mut unscattered = vec![Vec3::ZERO; settings.gate_count()];
-                accumulate_j_guided(
-                    &vol,
-                    &lights,
-                    z,
-                    n,
-                    &settings,
-                    1,
-                    guided,
-                    &mut rng,
-                    &mut out,
-                    Some(&mut unscattered),
-                );
-                let v = out[1..].iter().sum::<Vec3>() - unscattered[1..].iter().sum::<Vec3>();
-                sum += v;
-                sum2 += v * v;
-            }
-            let mean = sum / walks as f32;
-            let var = (sum2 / walks as f32 - mean * mean).max(Vec3::ZERO);
-            stats.push((mean, var / walks as f32));
+        (vol, lights, settings, z, n)
+    }
+
+    /// One walk's collided part of its terms `k ≥ 1` ([`collided`]) and
+    /// the part before its first collision, by [`accumulate_j_guided`].
+    fn split_walk(
+        vol: &Volume<Field>,
+        lights: &Lights,
+        settings: &GateSettings,
+        z: Vec3,
+        n: Vec3,
+        guided: bool,
+        rng: &mut Rng,
+    ) -> (Vec3, Vec3) {
+        let mut out = vec![Vec3::ZERO; settings.gate_count()];
+        let mut unscattered = vec![Vec3::ZERO; settings.gate_count()];
+        accumulate_j_guided(
+            vol,
+            lights,
+            z,
+            n,
+            settings,
+            1,
+            guided,
+            rng,
+            &mut out,
+            Some(&mut unscattered),
+        );
+        (
+            collided(&out, &unscattered),
+            unscattered[1..].iter().sum::<Vec3>(),
+        )
+    }
+
+    /// The mean of `walks` values of `f` (walk `w` on stream
+    /// `Rng::for_sample(seed, w, stream)`) and the variance of that mean.
+    fn mean_and_its_variance(
+        walks: u32,
+        seed: u64,
+        stream: u32,
+        mut f: impl FnMut(&mut Rng) -> Vec3,
+    ) -> (Vec3, Vec3) {
+        let (mut sum, mut sum2) = (Vec3::ZERO, Vec3::ZERO);
+        for w in 0..walks {
+            let mut rng = Rng::for_sample(seed, w, stream);
+            let v = f(&mut rng);
+            sum += v;
+            sum2 += v * v;
         }
+        let mean = sum / walks as f32;
+        let var = (sum2 / walks as f32 - mean * mean).max(Vec3::ZERO);
+        (mean, var / walks as f32)
+    }
+
+    /// Guiding the walks towards the light changes their spread, not their
+    /// mean: in a bounded, forward-scattering, heterogeneous medium lit by
+    /// a sun and a point light, the collided part of every term agrees
+    /// with the unguided walk's (summed over `k ≥ 1`, per channel, within
+    /// 4.5 standard errors of the difference), and the guided walks' values
+    /// are less spread (their standard error lower).
+    #[test]
+    fn guided_walks_keep_the_mean() {
+        let (vol, mut lights, settings, z, n) = forward_scattering_walk();
+        lights.points.push(crate::physics::lights::PointLight {
+            position: Vec3::new(-2.0, 0.5, 1.5),
+            intensity: Vec3::splat(4.0),
+        });
+        let stats: Vec<(Vec3, Vec3)> = [false, true]
+            .into_iter()
+            .map(|guided| {
+                mean_and_its_variance(400_000, 21, u32::from(guided), |rng| {
+                    split_walk(&vol, &lights, &settings, z, n, guided, rng).0
+                })
+            })
+            .collect();
         let ((m0, v0), (m1, v1)) = (stats[0], stats[1]);
         for c in 0..3 {
             let se = (v0[c] + v1[c]).sqrt();
@@ -1391,64 +1431,18 @@ mod tests {
     /// part it leaves out (which would show if it kept or lost a share).
     #[test]
     fn collided_walks_match_the_collided_part() {
-        let mut vol = boxed(1.2, 0.8, 0.95, 1.0, 4);
-        vol.optics.g = 0.6;
-        let lights = Lights {
-            suns: vec![crate::physics::lights::Sun {
-                direction: Vec3::new(0.6, -1.0, -0.5).normalize(),
-                irradiance: Vec3::new(3.0, 2.0, 1.0),
-            }],
-            points: Vec::new(),
-        };
-        let settings = GateSettings {
-            s_star: 0.5,
-            n_terms: 40,
-            clock: Clock::OpticalDepth,
-            rr_start: crate::physics::reference::RR_START_DEPTH,
-        };
-        let z = Vec3::new(0.1, -0.4, 0.2);
-        let n = Vec3::new(0.3, 0.2, -1.0).normalize();
+        let (vol, lights, settings, z, n) = forward_scattering_walk();
         let walks = 200_000u32;
-        let stats = |f: &mut dyn FnMut(&mut Rng) -> Vec3, stream: u32| {
-            let (mut sum, mut sum2) = (Vec3::ZERO, Vec3::ZERO);
-            for w in 0..walks {
-                let mut rng = Rng::for_sample(23, w, stream);
-                let v = f(&mut rng);
-                sum += v;
-                sum2 += v * v;
-            }
-            let mean = sum / walks as f32;
-            (
-                mean,
-                (sum2 / walks as f32 - mean * mean).max(Vec3::ZERO) / walks as f32,
-            )
-        };
         let mut uncollided = Vec3::ZERO;
-        let (full, full_var) = stats(
-            &mut |rng| {
-                let mut out = vec![Vec3::ZERO; settings.gate_count()];
-                let mut unscattered = vec![Vec3::ZERO; settings.gate_count()];
-                accumulate_j_from(
-                    &vol,
-                    &lights,
-                    z,
-                    n,
-                    &settings,
-                    1,
-                    rng,
-                    &mut out,
-                    Some(&mut unscattered),
-                );
-                uncollided += unscattered[1..].iter().sum::<Vec3>();
-                collided(&out, &unscattered)
-            },
-            0,
-        );
+        let (full, full_var) = mean_and_its_variance(walks, 23, 0, |rng| {
+            let (collided, before) = split_walk(&vol, &lights, &settings, z, n, true, rng);
+            uncollided += before;
+            collided
+        });
         uncollided /= walks as f32;
-        let (skip, skip_var) = stats(
-            &mut |rng| accumulate_collided(&vol, &lights, z, n, &settings, rng),
-            1,
-        );
+        let (skip, skip_var) = mean_and_its_variance(walks, 23, 1, |rng| {
+            accumulate_collided(&vol, &lights, z, n, &settings, rng)
+        });
         eprintln!("collided {full} (with every gate), {skip} (skipping), uncollided {uncollided}");
         for c in 0..3 {
             let se = (full_var[c] + skip_var[c]).sqrt();
