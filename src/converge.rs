@@ -64,7 +64,8 @@ pub struct ConvergeArgs {
     /// to: two independent renders of this many passes each (other seeds,
     /// so other light sets), whose difference gives their noise, and the
     /// error of their average less that noise the method's bias against
-    /// the converged reference (0: not measured).
+    /// the converged reference, also by brightness quarter of the
+    /// converged image (0: not measured).
     #[arg(long, default_value_t = 0)]
     pub floor_passes: u32,
     /// Internal-lights parameters (default: the scene's).
@@ -130,6 +131,74 @@ pub fn split_bias(
     let bias = ((se - var - half) / n).max(0.0).sqrt() / mean;
     let noise = (half / n).sqrt() / mean;
     (bias as f32, noise as f32)
+}
+
+/// One brightness band of [`bias_by_brightness`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BrightnessBand {
+    /// The converged image's mean over the band's pixels.
+    pub converged_mean: f64,
+    /// The relative error of the renders' mean over the band,
+    /// `mean(ā) / mean(c) − 1`.
+    pub mean_error: f64,
+    /// The band's share of [`split_bias`]'s squared bias (its terms of the
+    /// same sum; the shares add up to the unclamped square, relative to
+    /// the whole converged image's mean squared).
+    pub bias_share: f64,
+}
+
+/// [`split_bias`]'s squared bias split into `bands` bands of equal pixel
+/// count by the converged image's brightness (the sum of its channels),
+/// darkest first: where in the image the bias is, and whether it is an
+/// offset of the band's mean or structure within it.
+pub fn bias_by_brightness(
+    a1: &[Vec3],
+    a2: &[Vec3],
+    converged: &[Vec3],
+    converged_var: &[Vec3],
+    bands: usize,
+) -> Vec<BrightnessBand> {
+    let pixels = a1
+        .len()
+        .min(a2.len())
+        .min(converged.len())
+        .min(converged_var.len());
+    let bands = bands.clamp(1, pixels.max(1));
+    let mut order: Vec<usize> = (0..pixels).collect();
+    order.sort_by(|&i, &j| {
+        converged[i]
+            .element_sum()
+            .total_cmp(&converged[j].element_sum())
+    });
+    let n = pixels.max(1) as f64 * 3.0;
+    let image_mean = (converged[..pixels]
+        .iter()
+        .map(|c| c.element_sum() as f64)
+        .sum::<f64>()
+        / n)
+        .max(1e-30);
+    (0..bands)
+        .map(|b| {
+            let band = &order[b * pixels / bands..(b + 1) * pixels / bands];
+            let (mut sa, mut sc, mut excess) = (0.0f64, 0.0f64, 0.0f64);
+            for &i in band {
+                for k in 0..3 {
+                    let (x, y, c) = (a1[i][k] as f64, a2[i][k] as f64, converged[i][k] as f64);
+                    let avg = 0.5 * (x + y);
+                    sa += avg;
+                    sc += c;
+                    excess +=
+                        (avg - c).powi(2) - 0.25 * (x - y).powi(2) - converged_var[i][k] as f64;
+                }
+            }
+            let count = (band.len().max(1) * 3) as f64;
+            BrightnessBand {
+                converged_mean: sc / count,
+                mean_error: if sc > 0.0 { sa / sc - 1.0 } else { 0.0 },
+                bias_share: excess / n / (image_mean * image_mean),
+            }
+        })
+        .collect()
 }
 
 /// The first time a curve is at or below `target`, linearly interpolated
@@ -445,6 +514,26 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
             100.0 * noise,
             100.0 * ((m(&a1) + m(&a2)) / (2.0 * m(&converged)).max(1e-30) - 1.0)
         );
+        let _ = writeln!(
+            report,
+            "\n| brightness quarter (converged image) | its mean | error of its mean | share of bias² |\n|---|---|---|---|"
+        );
+        let bands = bias_by_brightness(&a1, &a2, &converged, &converged_var, 4);
+        let total: f64 = bands.iter().map(|b| b.bias_share).sum();
+        for (q, b) in bands.iter().enumerate() {
+            let _ = writeln!(
+                report,
+                "| {} | {:.5} | {:+.2} % | {:.0} % |",
+                ["darkest", "second", "third", "brightest"][q],
+                b.converged_mean,
+                100.0 * b.mean_error,
+                if total > 0.0 {
+                    100.0 * b.bias_share / total
+                } else {
+                    0.0
+                }
+            );
+        }
     }
     print!("{report}");
     std::fs::write(out_dir.join("report.md"), &report)
@@ -564,6 +653,35 @@ mod tests {
         let (b1, b2) = (noisy(0.0), noisy(0.0));
         let (bias, _) = split_bias(&b1, &b2, &converged, &var);
         assert!(bias < 0.02, "bias {bias}");
+    }
+
+    /// A bias on the brighter half only: the split puts all of it there,
+    /// with that half's mean error, and its shares add up to the square of
+    /// [`split_bias`]'s bias (no noise, so nothing is clamped).
+    #[test]
+    fn bias_by_brightness_finds_the_biased_band() {
+        let n = 1000;
+        let converged: Vec<Vec3> = (0..n)
+            .map(|i| Vec3::splat(if i % 2 == 0 { 0.1 } else { 1.0 }))
+            .collect();
+        let var = vec![Vec3::ZERO; n];
+        let render: Vec<Vec3> = converged
+            .iter()
+            .map(|c| if c.x > 0.5 { *c * 1.04 } else { *c })
+            .collect();
+        let bands = bias_by_brightness(&render, &render, &converged, &var, 2);
+        assert_eq!(bands.len(), 2);
+        assert!((bands[0].converged_mean - 0.1).abs() < 1e-6, "{bands:?}");
+        assert!(bands[0].mean_error.abs() < 1e-6 && bands[0].bias_share.abs() < 1e-9);
+        assert!((bands[1].converged_mean - 1.0).abs() < 1e-6, "{bands:?}");
+        assert!((bands[1].mean_error - 0.04).abs() < 1e-5, "{bands:?}");
+        let (bias, _) = split_bias(&render, &render, &converged, &var);
+        let total: f64 = bands.iter().map(|b| b.bias_share).sum();
+        assert!(
+            (total - (bias as f64).powi(2)).abs() < 1e-4 * total,
+            "shares {total}, bias² {}",
+            (bias as f64).powi(2)
+        );
     }
 
     #[test]
