@@ -117,20 +117,47 @@ pub fn split_bias(
     converged_var: &[Vec3],
 ) -> (f32, f32) {
     let n = a1.len().max(1) as f64 * 3.0;
-    let (mut se, mut half, mut var, mut sum) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let mut sums = ErrorSums::default();
     for (((x, y), c), v) in a1.iter().zip(a2).zip(converged).zip(converged_var) {
+        sums.add(*x, *y, *c, *v);
+    }
+    let mean = (sums.converged / n).max(1e-30);
+    let bias = (sums.excess() / n).max(0.0).sqrt() / mean;
+    let noise = (sums.half / n).sqrt() / mean;
+    (bias as f32, noise as f32)
+}
+
+/// Sums over pixel channels of what [`split_bias`] and
+/// [`bias_by_brightness`] compare: the renders' average `ā = (a₁ + a₂)/2`,
+/// the converged image `c`, the squared error `(ā − c)²`, the renders' own
+/// noise `(a₁ − a₂)²/4` and the converged image's `Var[c]`.
+#[derive(Clone, Copy, Debug, Default)]
+struct ErrorSums {
+    average: f64,
+    converged: f64,
+    squared_error: f64,
+    half: f64,
+    var: f64,
+}
+
+impl ErrorSums {
+    /// Adds one pixel's three channels.
+    fn add(&mut self, a1: Vec3, a2: Vec3, c: Vec3, var: Vec3) {
         for k in 0..3 {
-            let (x, y, c) = (x[k] as f64, y[k] as f64, c[k] as f64);
-            se += (0.5 * (x + y) - c).powi(2);
-            half += 0.25 * (x - y).powi(2);
-            var += v[k] as f64;
-            sum += c;
+            let (x, y, c) = (a1[k] as f64, a2[k] as f64, c[k] as f64);
+            let avg = 0.5 * (x + y);
+            self.average += avg;
+            self.converged += c;
+            self.squared_error += (avg - c).powi(2);
+            self.half += 0.25 * (x - y).powi(2);
+            self.var += var[k] as f64;
         }
     }
-    let mean = (sum / n).max(1e-30);
-    let bias = ((se - var - half) / n).max(0.0).sqrt() / mean;
-    let noise = (half / n).sqrt() / mean;
-    (bias as f32, noise as f32)
+
+    /// The squared error less both noises: the squared bias's sum.
+    fn excess(&self) -> f64 {
+        self.squared_error - self.var - self.half
+    }
 }
 
 /// One brightness band of [`bias_by_brightness`].
@@ -180,22 +207,19 @@ pub fn bias_by_brightness(
     (0..bands)
         .map(|b| {
             let band = &order[b * pixels / bands..(b + 1) * pixels / bands];
-            let (mut sa, mut sc, mut excess) = (0.0f64, 0.0f64, 0.0f64);
+            let mut sums = ErrorSums::default();
             for &i in band {
-                for k in 0..3 {
-                    let (x, y, c) = (a1[i][k] as f64, a2[i][k] as f64, converged[i][k] as f64);
-                    let avg = 0.5 * (x + y);
-                    sa += avg;
-                    sc += c;
-                    excess +=
-                        (avg - c).powi(2) - 0.25 * (x - y).powi(2) - converged_var[i][k] as f64;
-                }
+                sums.add(a1[i], a2[i], converged[i], converged_var[i]);
             }
             let count = (band.len().max(1) * 3) as f64;
             BrightnessBand {
-                converged_mean: sc / count,
-                mean_error: if sc > 0.0 { sa / sc - 1.0 } else { 0.0 },
-                bias_share: excess / n / (image_mean * image_mean),
+                converged_mean: sums.converged / count,
+                mean_error: if sums.converged > 0.0 {
+                    sums.average / sums.converged - 1.0
+                } else {
+                    0.0
+                },
+                bias_share: sums.excess() / n / (image_mean * image_mean),
             }
         })
         .collect()

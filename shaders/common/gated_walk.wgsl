@@ -299,11 +299,14 @@ fn gate_add(
     rng: ptr<function, Rng>,
     out: ptr<function, GateTerms>,
 ) {
+    if k < first || all(w == vec3<f32>(0.0)) || (walk_collided_only && !scattered) {
+        return;
+    }
     var rho = rho_z;
     if settings.clock == CLOCK_GEOMETRIC {
         rho = density(zk);
     }
-    if k < first || rho <= 0.0 || all(w == vec3<f32>(0.0)) || (walk_collided_only && !scattered) {
+    if rho <= 0.0 {
         return;
     }
     let scatter = scene.medium.albedo * scene.medium.sigma_t;

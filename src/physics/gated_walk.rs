@@ -545,6 +545,35 @@ pub fn clock_at_each<D: DensityField>(
     }
 }
 
+/// The clock's advance along the ray from `origin` (inside or on the box)
+/// over `[0, t]`, `t` clamped to `[0, t_exit]`: one [`march_clock`] with an
+/// unlimited budget (what [`clock_at_each`] gives at each of many points).
+#[inline]
+pub fn clock_to<D: DensityField>(
+    vol: &Volume<D>,
+    clock: Clock,
+    s_star: f32,
+    origin: Vec3,
+    dir: Vec3,
+    t: f32,
+    t_exit: f32,
+) -> f32 {
+    match march_clock(
+        vol,
+        clock,
+        s_star,
+        origin,
+        dir,
+        0.0,
+        t_exit,
+        t,
+        f32::INFINITY,
+    ) {
+        ClockMarch::Exhausted(d) => d,
+        ClockMarch::Reached(_) => f32::INFINITY,
+    }
+}
+
 /// Runs one backward walk from `z` along `−n` (`n`: the direction light
 /// travels at `z`), calling `on_gate(k, weight, z_k, n_k)` each time the
 /// clock reaches `k · s*`, `k = 0..=N`: `z_k` is the walk's position then,
@@ -1664,20 +1693,7 @@ mod tests {
             let mut out = vec![f32::NAN; ts.len()];
             clock_at_each(&vol, clock, 0.25, origin, dir, t_exit, &ts, &mut out);
             for (&t, &got) in ts.iter().zip(&out) {
-                let want = match march_clock(
-                    &vol,
-                    clock,
-                    0.25,
-                    origin,
-                    dir,
-                    0.0,
-                    t_exit,
-                    t,
-                    f32::INFINITY,
-                ) {
-                    ClockMarch::Exhausted(d) => d,
-                    ClockMarch::Reached(_) => f32::NAN,
-                };
+                let want = clock_to(&vol, clock, 0.25, origin, dir, t, t_exit);
                 assert!(
                     (got - want).abs() <= 1e-4 * want.max(1e-3),
                     "{clock:?}, t {t}: one march {got}, march to the point {want}"

@@ -63,7 +63,7 @@
 use glam::Vec3;
 
 use super::gated_walk::{
-    clock_at_each, march_clock, march_clock_rate, ChancesAlongRay, Clock, ClockMarch,
+    clock_at_each, clock_to, march_clock, march_clock_rate, ChancesAlongRay, Clock, ClockMarch,
 };
 use super::internal::{InternalLights, L1Form, Part};
 use super::lights::Lights;
@@ -107,39 +107,6 @@ impl GatherSample {
     /// `L₀ + L₁`.
     pub fn total(&self) -> Vec3 {
         self.single + self.reconstructed + self.internal
-    }
-}
-
-/// The clock's advance along the ray from `origin` (inside or on the box)
-/// over `[0, t]`, `t ≤ t_exit`.
-#[inline]
-fn clock_to<D: DensityField>(
-    vol: &Volume<D>,
-    clock: Clock,
-    s_star: f32,
-    origin: Vec3,
-    dir: Vec3,
-    t: f32,
-    t_exit: f32,
-) -> f32 {
-    match clock {
-        Clock::Geometric => t,
-        Clock::OpticalDepth => {
-            match march_clock(
-                vol,
-                clock,
-                s_star,
-                origin,
-                dir,
-                0.0,
-                t_exit,
-                t,
-                f32::INFINITY,
-            ) {
-                ClockMarch::Exhausted(d) => d,
-                ClockMarch::Reached(_) => f32::INFINITY,
-            }
-        }
     }
 }
 
