@@ -8,17 +8,20 @@
 const CLOCK_GEOMETRIC: u32 = 0u;
 const CLOCK_OPTICAL_DEPTH: u32 = 1u;
 
-// The fraction of the window `s*` above which a majorant cell's majorant
-// optical depth makes the optical-depth quadrature take two lattice steps
-// in the cell instead of one (`CLOCK_SPLIT_WINDOW`).
+// The largest majorant optical depth of one step of the optical-depth
+// clock's quadrature, as a fraction of the window `s*`
+// (`CLOCK_SPLIT_WINDOW`), and the most steps in one majorant cell
+// (`CLOCK_MAX_STEPS`).
 const CLOCK_SPLIT_WINDOW: f32 = 0.25;
+const CLOCK_MAX_STEPS: f32 = 64.0;
 
 // The quadrature step in a majorant cell of extinction majorant `m` under
 // the window `s_star`, `cell` being the cell's smallest extent
 // (`clock_step`).
 fn clock_step(cell: f32, m: f32, s_star: f32) -> f32 {
-    if m * cell > CLOCK_SPLIT_WINDOW * s_star {
-        return 0.5 * cell;
+    let steps = ceil(m * cell / (CLOCK_SPLIT_WINDOW * s_star));
+    if steps > 1.0 {
+        return cell / min(steps, CLOCK_MAX_STEPS);
     }
     return cell;
 }
@@ -32,6 +35,11 @@ const GPU_MAX_GATES: u32 = 257u;
 // `MAX_COLLISIONS_GUARD` of reference.wgsl: the roulette survives at most
 // 0.95 per collision).
 const WALK_COLLISIONS_GUARD: u32 = 4096u;
+
+// Collisions of a walk after which its directions are guided; later ones
+// come from the phase function alone (`GUIDED_COLLISIONS` in
+// `physics/gated_walk.rs`).
+const GUIDED_COLLISIONS: u32 = 2u;
 
 // Per-gate terms of one walk, `k = 0..=N`.
 alias GateTerms = array<vec3<f32>, GPU_MAX_GATES>;
@@ -412,9 +420,13 @@ fn accumulate_j_from(
             }
             let u1 = rng_next_f32(rng);
             let u2 = rng_next_f32(rng);
-            let next_dir = guided_direction(scene.medium.g, origin, dir, u1, u2, rng);
-            dir = next_dir.dir;
-            weight *= next_dir.factor;
+            if collisions <= GUIDED_COLLISIONS {
+                let next_dir = guided_direction(scene.medium.g, origin, dir, u1, u2, rng);
+                dir = next_dir.dir;
+                weight *= next_dir.factor;
+            } else {
+                dir = sample_hg(scene.medium.g, dir, u1, u2);
+            }
         } else {
             if all(weight == vec3<f32>(0.0)) {
                 return;

@@ -272,6 +272,16 @@ mod tests {
                 gated_walk::GUIDE_PROBABILITY as f64,
             ),
             (GATED_WALK, "GUIDE_G", gated_walk::GUIDE_G as f64),
+            (
+                GATED_WALK,
+                "CLOCK_MAX_STEPS",
+                gated_walk::CLOCK_MAX_STEPS as f64,
+            ),
+            (
+                GATED_WALK,
+                "GUIDED_COLLISIONS",
+                gated_walk::GUIDED_COLLISIONS as f64,
+            ),
         ];
         for (part, name, cpu) in pairs {
             let gpu = wgsl_const(part, name);
