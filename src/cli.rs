@@ -24,7 +24,7 @@ use crate::render::tonemap::ViewTransform;
 use crate::render::{
     internal_params, internal_params_for_set, light_set, light_set_starting, Film, Prepared,
 };
-use crate::scene::{ClockKind, InternalSettings, L1Kind, Method, RenderSettings, Scene};
+use crate::scene::{ClockKind, InternalSettings, L1Kind, Method, Quality, RenderSettings, Scene};
 
 /// Lantern: multiple scattering as internal lights, live.
 #[derive(Debug, Parser)]
@@ -120,9 +120,31 @@ impl From<L1Arg> for L1Kind {
     }
 }
 
+/// The internal lights' presets on the command line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum QualityArg {
+    /// Fewer walks and gather points: fast light sets for live edits.
+    Preview,
+    /// The settings the accuracy targets are measured with (the default).
+    Final,
+}
+
+impl From<QualityArg> for Quality {
+    fn from(q: QualityArg) -> Self {
+        match q {
+            QualityArg::Preview => Quality::Preview,
+            QualityArg::Final => Quality::Final,
+        }
+    }
+}
+
 /// Overrides of the internal-lights parameters (default: the scene's).
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct InternalArgs {
+    /// Preset of the internal lights' settings: replaces the scene's, and
+    /// the flags below override it.
+    #[arg(long, value_enum)]
+    pub quality: Option<QualityArg>,
     /// Window length s* (distance, or mean free paths for the optical-depth clock).
     #[arg(long)]
     pub s_star: Option<f32>,
@@ -161,6 +183,10 @@ pub struct InternalArgs {
     /// Internal-light samples per camera sample.
     #[arg(long)]
     pub light_samples: Option<u32>,
+    /// Share of the lights placed in the camera rays' windows instead of
+    /// by density (0..=1).
+    #[arg(long)]
+    pub view_share: Option<f32>,
     /// Passes per set of internal lights; a fresh set (the seed's next)
     /// after each such run of passes, so the walk noise averages out
     /// (0: one set for the whole render).
@@ -171,6 +197,9 @@ pub struct InternalArgs {
 impl InternalArgs {
     /// Writes the given overrides into `settings`.
     pub fn apply(&self, settings: &mut InternalSettings) {
+        if let Some(q) = self.quality {
+            *settings = Quality::from(q).settings();
+        }
         if let Some(v) = self.s_star {
             settings.s_star = Some(v);
         }
@@ -206,6 +235,9 @@ impl InternalArgs {
         }
         if let Some(v) = self.light_samples {
             settings.light_samples = v;
+        }
+        if let Some(v) = self.view_share {
+            settings.view_share = v;
         }
         if let Some(v) = self.resample_every {
             settings.resample_every = v;

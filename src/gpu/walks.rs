@@ -43,8 +43,8 @@ use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer,
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
 use crate::physics::gated_walk::Clock;
 use crate::physics::internal::{
-    kernel_radius_for, within_view_reach, InternalLight, InternalLights, InternalParams,
-    LightSources,
+    kernel_radius_for, place_internal_lights, within_view_reach, InternalLight, InternalLights,
+    InternalParams, LightSources,
 };
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::sh::{sh_count, MAX_ORDER};
@@ -255,6 +255,32 @@ fn place(
             max: (MAX_GROUPS * PLACEMENT_LANES) as u64,
         })?;
     let density = prepared.placement_density(params.uniform_mix);
+    if params.view_share > 0.0 {
+        // The share placed in the camera's windows marches camera rays
+        // through the medium: the CPU places all the lights (the same ones
+        // as the CPU backend's for this seed) and they go up as they are.
+        let (lights, density_integral) = place_internal_lights(&prepared.volume, params, &density);
+        let raw: Vec<[f32; 4]> = lights
+            .iter()
+            .flat_map(|l| {
+                let p = l.position;
+                [[p.x, p.y, p.z, l.density], [l.weight, 0.0, 0.0, 0.0]]
+            })
+            .collect();
+        let placed = storage_buffer(
+            ctx,
+            "placed internal lights",
+            bytemuck::cast_slice(&raw),
+            wgpu::BufferUsages::COPY_SRC,
+        )?;
+        return Ok(Build {
+            ctx: ctx.clone(),
+            scene: SceneBuffers::new(ctx, prepared)?,
+            placed,
+            light_count: lights.len() as u32,
+            density_integral,
+        });
+    }
     let (threshold, alias) = density.alias_table();
     let mut table: Vec<[u32; 2]> = threshold
         .iter()

@@ -541,6 +541,8 @@ mod tests {
             eye: Vec3::ZERO,
             seed: 0,
             renewed: false,
+            view_share: 0.0,
+            view_frame: Default::default(),
         }
     }
 
@@ -740,6 +742,8 @@ mod tests {
             view_walks: 1024,
             eye,
             renewed: true,
+            view_share: 0.0,
+            view_frame: Default::default(),
             ..sh1_params(Clock::OpticalDepth, 0.5, 24, 0.3, L1Form::Field)
         };
         let cache = InternalLights::build(&vol, &sun, &params, &AtomicBool::new(false))

@@ -86,6 +86,7 @@ use super::reference::RR_START_DEPTH;
 use super::rng::Rng;
 use super::sh::{sh_basis, sh_count, MAX_COUNT, MAX_ORDER};
 use super::tracking::transmittance;
+use super::view_placement::{knn_kernel_radius, place_in_view, ViewFrame};
 use super::volume::{DensityField, Volume};
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) of the walks, apart
@@ -155,6 +156,12 @@ pub struct InternalParams {
     pub eye: Vec3,
     /// Seed of the placement and the walks.
     pub seed: u64,
+    /// The share of the `M` lights placed in the camera's windows rather
+    /// than by density ([`super::view_placement`]; 0: the note's placement
+    /// alone). Needs `view_frame`, and ties the lights to the camera.
+    pub view_share: f32,
+    /// The camera, for `view_share` (the default frame when unused).
+    pub view_frame: ViewFrame,
     /// Whether the render renews its light sets (`resample_every > 0`):
     /// the passes then average over sets, and the kernel reconstruction
     /// is left unclamped ([`InternalLights::reconstruct_multi`]).
@@ -166,6 +173,12 @@ pub struct InternalParams {
 /// averages out the walks' noise in `J_i` (with 1.5, about 14 lights, the
 /// thin sphere showed blotches of ±20 % at `K = 64`).
 pub const AUTO_KERNEL_FACTOR: f32 = 2.5;
+
+/// The automatic kernel radius of lights placed in the camera's windows
+/// ([`InternalParams::view_share`]): the median distance from a light to
+/// its this-many-th nearest neighbour, about the number of lights inside
+/// [`AUTO_KERNEL_FACTOR`]'s support for lights that fill a volume.
+pub const KERNEL_NEIGHBOURS: usize = 64;
 
 /// The most scatterings inside the final window the gather follows
 /// ([`InternalParams::window_scatters`]).
@@ -392,6 +405,12 @@ pub fn kernel_radius_for<D: DensityField>(
     lights: &[InternalLight],
 ) -> f32 {
     params.kernel_radius.unwrap_or_else(|| {
+        if params.view_share > 0.0 {
+            let positions: Vec<Vec3> = lights.iter().map(|l| l.position).collect();
+            if let Some(r) = knn_kernel_radius(&positions, KERNEL_NEIGHBOURS, 512) {
+                return r;
+            }
+        }
         let m = lights.len().max(1);
         let mut v: Vec<f32> = lights
             .iter()
@@ -468,6 +487,53 @@ pub fn placement_density<D: DensityField>(vol: &Volume<D>, u_mix: f32) -> Placem
     PlacementDensity::build(&vol.density, vol.bounds, PLACEMENT_RESOLUTION, u_mix)
 }
 
+/// Places the `M` lights of `params`: the share
+/// [`InternalParams::view_share`] in the camera's windows
+/// ([`place_in_view`], no volume weight), the rest by `density` (with
+/// their weights `V_i`); returns them with the placement's `∫ρ`. Both
+/// backends build on these lights (the GPU places by density itself only
+/// when no share is placed in the camera's windows).
+pub fn place_internal_lights<D: DensityField>(
+    vol: &Volume<D>,
+    params: &InternalParams,
+    density: &PlacementDensity,
+) -> (Vec<InternalLight>, f32) {
+    let m = params.lights.max(1);
+    let share = params.view_share.clamp(0.0, 1.0);
+    let m_view = (share * m as f32).round() as usize;
+    let in_view = if m_view > 0 {
+        place_in_view(
+            vol,
+            &params.view_frame,
+            params.clock,
+            params.s_star,
+            m_view,
+            params.seed,
+        )
+    } else {
+        Vec::new()
+    };
+    // Lights whose camera rays all missed the medium are placed by
+    // density instead.
+    let missed = in_view.iter().filter(|p| p.is_none()).count();
+    let placement = place_lights_with(density, m - m_view + missed, params.seed);
+    let lights: Vec<InternalLight> = in_view
+        .par_iter()
+        .flatten()
+        .map(|&position| InternalLight {
+            position,
+            density: vol.density.density(position),
+            weight: 0.0,
+        })
+        .chain(placement.lights.par_iter().map(|l| InternalLight {
+            position: l.position,
+            density: vol.density.density(l.position),
+            weight: l.weight,
+        }))
+        .collect();
+    (lights, placement.density_integral)
+}
+
 impl InternalLights {
     /// Places the lights, runs the walks and builds the indices. Returns
     /// `None` if `cancel` is set meanwhile.
@@ -499,29 +565,12 @@ impl InternalLights {
         cancel: &AtomicBool,
     ) -> Option<Self> {
         let start = Instant::now();
-        let m = params.lights.max(1);
-        let placement = place_lights_with(density().borrow(), m, params.seed);
-        let lights: Vec<InternalLight> = placement
-            .lights
-            .par_iter()
-            .map(|l| InternalLight {
-                position: l.position,
-                density: vol.density.density(l.position),
-                weight: l.weight,
-            })
-            .collect();
+        let (lights, density_integral) = place_internal_lights(vol, params, density().borrow());
         let t_place = start.elapsed().as_secs_f64();
         if cancel.load(Ordering::Relaxed) {
             return None;
         }
-        let mut out = Self::build_at(
-            vol,
-            external,
-            params,
-            lights,
-            placement.density_integral,
-            cancel,
-        )?;
+        let mut out = Self::build_at(vol, external, params, lights, density_integral, cancel)?;
         out.timings.placement = t_place;
         Some(out)
     }

@@ -21,4 +21,5 @@ pub mod rng;
 pub mod segment_pdf;
 pub mod sh;
 pub mod tracking;
+pub mod view_placement;
 pub mod volume;

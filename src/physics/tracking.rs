@@ -266,7 +266,7 @@ pub fn transmittance_at_rate<D: DensityField>(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::physics::volume::Optics;
 

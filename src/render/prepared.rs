@@ -12,7 +12,9 @@ use crate::physics::gated_walk::Clock;
 use crate::physics::internal::{placement_density, InternalLights, InternalParams, L1Form};
 use crate::physics::lights::{Lights, PointLight, Sun};
 use crate::physics::placement::PlacementDensity;
+use crate::physics::view_placement::ViewFrame;
 use crate::physics::volume::{DensityField, Optics, Volume};
+use crate::scene::settings::DEFAULT_S_STAR;
 use crate::scene::{
     CameraFrame, ClockKind, Density, L1Kind, Light, RenderSettings, Scene, SceneError,
 };
@@ -142,10 +144,8 @@ pub fn lights_of(lights: &[Light]) -> Lights {
 }
 
 /// The internal-lights parameters of `settings` for this scene, with the
-/// defaults resolved: `s*` is the diagonal of the medium's box for the
-/// geometric clock, and for the optical-depth clock the diagonal's optical
-/// depth at the box's mean density (`max(σ_t) · ρ̄ · diagonal`, with `ρ̄`
-/// from a 24³ midpoint rule). These are the parameters of light set 0; see
+/// defaults resolved (`s*`: [`default_s_star`]). These are the parameters
+/// of light set 0; see
 /// [`internal_params_for_set`].
 pub fn internal_params(prepared: &Prepared, settings: &RenderSettings) -> InternalParams {
     internal_params_for_set(prepared, settings, 0)
@@ -202,10 +202,24 @@ pub fn internal_params_for_set(
         view_walks: s.view_walks,
         // Only the view walks tie the lights to the camera: without them
         // moving the camera must not re-sample the lights.
-        eye: if s.view_walks > 0 {
+        eye: if s.view_walks > 0 || s.view_share > 0.0 {
             prepared.camera.eye
         } else {
             glam::Vec3::ZERO
+        },
+        view_share: s.view_share,
+        // Like the eye: only lights placed in the camera's windows depend
+        // on the rest of the camera.
+        view_frame: if s.view_share > 0.0 {
+            let f = prepared.camera;
+            ViewFrame {
+                eye: f.eye,
+                forward: f.forward,
+                right_scaled: f.right_scaled,
+                up_scaled: f.up_scaled,
+            }
+        } else {
+            ViewFrame::default()
         },
         seed: settings
             .seed
@@ -214,29 +228,42 @@ pub fn internal_params_for_set(
     }
 }
 
-/// The default window `s*` (see [`internal_params`]).
+/// The default window `s*` (see [`internal_params`]): [`DEFAULT_S_STAR`]
+/// mean free paths, which with the optical-depth clock is the number
+/// itself; with the geometric clock that many mean free paths at the mean
+/// extinction of the medium where it is not empty (`max(σ_t) ρ̄` with `ρ̄`
+/// the mean of the non-zero densities of a 24³ midpoint rule), so that
+/// the window holds the same share of scatterings however large the box.
 pub fn default_s_star(volume: &SceneVolume, clock: Clock) -> f32 {
-    let (lo, hi) = volume.bounds;
-    let diagonal = (hi - lo).length();
     match clock {
-        Clock::Geometric => diagonal,
-        Clock::OpticalDepth => {
+        Clock::OpticalDepth => DEFAULT_S_STAR,
+        Clock::Geometric => {
             const N: usize = 24;
-            let mut sum = 0.0f64;
+            let (lo, hi) = volume.bounds;
+            let (mut sum, mut count) = (0.0f64, 0usize);
             for k in 0..N {
                 for j in 0..N {
                     for i in 0..N {
                         let f = (Vec3::new(i as f32, j as f32, k as f32) + 0.5) / N as f32;
-                        sum += volume.density.density(lo + (hi - lo) * f) as f64;
+                        let rho = volume.density.density(lo + (hi - lo) * f);
+                        if rho > 0.0 {
+                            sum += rho as f64;
+                            count += 1;
+                        }
                     }
                 }
             }
-            let mean = (sum / (N * N * N) as f64) as f32;
-            let s = volume.optics.sigma_t.max_element() * mean * diagonal;
+            let mean = if count > 0 {
+                (sum / count as f64) as f32
+            } else {
+                0.0
+            };
+            let c = volume.optics.sigma_t.max_element() * mean;
+            let s = DEFAULT_S_STAR / c;
             if s > 0.0 && s.is_finite() {
                 s
             } else {
-                1.0
+                (hi - lo).length()
             }
         }
     }

@@ -452,11 +452,13 @@ impl LightsCache {
     fn key_of(job: &Job) -> (Scene, PathBuf) {
         let mut scene = job.scene.clone();
         // The lights do not depend on the camera, except for the view
-        // walks' eye (`InternalParams::eye`).
-        let eye = scene.camera.eye;
-        scene.camera = crate::scene::Camera::default();
-        if scene.render.internal.view_walks > 0 {
-            scene.camera.eye = eye;
+        // walks' eye (`InternalParams::eye`) and, for the lights placed in
+        // the camera's windows, the whole camera (`InternalParams::view_frame`).
+        let camera = std::mem::take(&mut scene.camera);
+        if scene.render.internal.view_share > 0.0 {
+            scene.camera = camera;
+        } else if scene.render.internal.view_walks > 0 {
+            scene.camera.eye = camera.eye;
         }
         scene.render.spp = 0;
         scene.render.method = Method::Internal;
@@ -1077,6 +1079,7 @@ mod tests {
         let mut scene = Scene::default();
         scene.camera.eye = eye;
         scene.render.internal.view_walks = view_walks;
+        scene.render.internal.view_share = 0.0;
         Job {
             scene,
             scene_dir: PathBuf::from("."),
@@ -1094,5 +1097,20 @@ mod tests {
         assert!(LightsCache::key_of(&job(a, 0)) == LightsCache::key_of(&job(b, 0)));
         assert!(LightsCache::key_of(&job(a, 16)) != LightsCache::key_of(&job(b, 16)));
         assert!(LightsCache::key_of(&job(a, 16)) == LightsCache::key_of(&job(a, 16)));
+    }
+
+    /// Lights placed in the camera's windows follow the whole camera.
+    #[test]
+    fn lights_cache_follows_the_camera_with_lights_in_view() {
+        let in_view = |eye: Vec3, fov: f32| {
+            let mut j = job(eye, 0);
+            j.scene.render.internal.view_share = 0.5;
+            j.scene.camera.fov_y_deg = fov;
+            LightsCache::key_of(&j)
+        };
+        let a = Vec3::new(0.0, 0.0, 4.0);
+        assert!(in_view(a, 40.0) == in_view(a, 40.0));
+        assert!(in_view(a, 40.0) != in_view(Vec3::new(1.0, 0.5, 4.0), 40.0));
+        assert!(in_view(a, 40.0) != in_view(a, 30.0));
     }
 }

@@ -14,7 +14,7 @@ use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
 use super::backend::{Backend, ClockKind};
 use crate::physics::sh::MAX_ORDER;
 use crate::render::tonemap::ViewTransform;
-use crate::scene::L1Kind;
+use crate::scene::{L1Kind, Quality};
 use crate::scene::{Light, Method};
 
 /// Label of the window-length slider (tests find widgets by label).
@@ -32,6 +32,11 @@ pub const BACKEND_GPU: &str = "GPU";
 /// Label of the CPU backend's button.
 pub const BACKEND_CPU: &str = "CPU";
 
+/// Label of the quality-preset menu.
+pub const QUALITY: &str = "quality";
+/// Title of the section of the method's finer settings.
+pub const EXPERT: &str = "Expert: walks, lobes and kernel";
+
 /// Label of the density-scale slider.
 pub const DENSITY_SCALE: &str = "density scale";
 
@@ -44,7 +49,7 @@ pub fn panel_ui(ui: &mut Ui, app: &mut LanternApp) {
         egui::CollapsingHeader::new("Medium")
             .default_open(false)
             .show(ui, |ui| medium_ui(ui, app));
-        egui::CollapsingHeader::new("Walks, lobes and kernel")
+        egui::CollapsingHeader::new(EXPERT)
             .default_open(false)
             .show(ui, |ui| internal_detail_ui(ui, app));
         egui::CollapsingHeader::new("Lights")
@@ -100,7 +105,8 @@ fn method_knobs_ui(ui: &mut Ui, app: &mut LanternApp) {
          single scattering but many series terms are needed; long: fewer terms, \
          but two or more scatterings inside the window are lost (darker, \
          flatter interiors). Units: mean free paths with the optical-depth \
-         clock, world units with the geometric one. Auto: the box's diagonal.",
+         clock, world units with the geometric one. Auto: half a mean free \
+         path.",
     );
     ui.add(
         Slider::new(&mut internal.lights, 16..=262_144)
@@ -129,6 +135,26 @@ fn method_knobs_ui(ui: &mut Ui, app: &mut LanternApp) {
          that travels longer than (N+1)·s* is lost (the cloud's core goes dark); \
          the plot of term energies shows when more terms stop adding light.",
     );
+    let mut quality = internal.quality;
+    egui::ComboBox::from_label(QUALITY)
+        .selected_text(quality.name())
+        .show_ui(ui, |ui| {
+            for q in Quality::ALL {
+                ui.selectable_value(&mut quality, q, q.name());
+            }
+        })
+        .response
+        .on_hover_text(
+            "Preset of the expert settings below. Final: what the accuracy figures \
+             are measured with. Preview: light sets about four times faster for \
+             live edits, noisier passes. Choosing one replaces the expert \
+             settings; s*, M and N keep their values.",
+        );
+    if quality != internal.quality {
+        let keep = (internal.s_star, internal.lights, internal.terms);
+        *internal = quality.settings();
+        (internal.s_star, internal.lights, internal.terms) = keep;
+    }
 }
 
 fn medium_ui(ui: &mut Ui, app: &mut LanternApp) {
@@ -267,6 +293,15 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
              the puffs 16 of them cut the light sets' noise about fourfold). 0: \
              the harmonics, as in Tessendorf's note. With view walks, moving the \
              camera re-samples the lights.",
+        );
+    ui.add(Slider::new(&mut s.view_share, 0.0..=1.0).text("lights in view"))
+        .on_hover_text(
+            "Share of the lights placed where the camera reads them: in the first \
+             s* of each camera ray inside the medium. The rest are placed by \
+             density, as in Tessendorf's note, and give the series' energies. In \
+             thick clouds almost no density-placed light stands in that skin, and \
+             the image goes dark and blotchy without this. Moving the camera \
+             re-samples the lights.",
         );
     ui.add(Slider::new(&mut s.light_samples, 1..=64).text("light samples"))
         .on_hover_text(
