@@ -9,6 +9,21 @@
 //!   reduces to plain delta tracking when the channels agree.
 //! - [`transmittance`]: ratio tracking (Novák et al. 2014) with an unbiased
 //!   Russian roulette once the estimate is small.
+//!
+//! ## Bounded on any finite input
+//!
+//! Each tentative collision advances the ray by at least one `f32` step
+//! ([`advance`]): where a mean free path is shorter than the spacing of
+//! representable distances (a camera far from a dense medium), the
+//! position could otherwise stop moving while null collisions went on
+//! forever. With the majorant finite (the renderers clamp media denser
+//! than `render::prepared::MAX_DEPTH_PER_VOXEL`), a flight over `[t0, t1]`
+//! therefore takes at most about `majorant · (t1 − t0)` steps on average
+//! and never more than the number of `f32` values in between. A ray or
+//! interval that is not finite is refused: no tentative collision, and
+//! [`non_finite_flights`] counts it so that the caller can say so.
+
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::Vec3;
 
@@ -47,6 +62,12 @@ pub fn sample_tentative_at_rate(
     rng: &mut Rng,
     mut event: impl FnMut(f32, f32, &mut Rng) -> bool,
 ) -> bool {
+    if !(origin.is_finite() && dir.is_finite() && t0.is_finite() && t1.is_finite())
+        || !(rate.is_finite() && rate > 0.0)
+    {
+        NON_FINITE.fetch_add(1, Ordering::Relaxed);
+        return true;
+    }
     let mut steps = TentativeSteps::new(rng);
     grid.walk(origin, dir, t0, t1, |a, b, m| {
         let m = m * rate;
@@ -60,6 +81,27 @@ pub fn sample_tentative_at_rate(
         }
         true
     })
+}
+
+/// Flights refused because their ray or interval was not finite.
+static NON_FINITE: AtomicU64 = AtomicU64::new(0);
+
+/// How many flights (free flights and transmittance estimates) this
+/// process refused because their ray or interval was not finite: zero for
+/// every validated scene; the command line reports any as an error in the
+/// image.
+pub fn non_finite_flights() -> u64 {
+    NON_FINITE.load(Ordering::Relaxed)
+}
+
+/// The position `t + step` of the next tentative collision, at least one
+/// `f32` step beyond `t` (and beyond the smallest normal `f32`), and at
+/// most `end`. Where `step` is below the spacing of `f32` values at `t` the
+/// exact position cannot be represented anyway; moving on guarantees that
+/// the walk ends. The WGSL `tentative_advance` is the same.
+#[inline]
+pub fn advance(t: f32, step: f32, end: f32) -> f32 {
+    (t + step).max(t.max(f32::MIN_POSITIVE).next_up()).min(end)
 }
 
 /// The exponential steps between tentative collisions against a majorant
@@ -86,7 +128,7 @@ impl TentativeSteps {
     /// majorant `m`, or `None` having used up the stretch.
     #[inline]
     pub fn next(&mut self, t: f32, b: f32, m: f32) -> Option<f32> {
-        if m <= 0.0 {
+        if m.is_nan() || m <= 0.0 {
             return None;
         }
         let seg = m * (b - t);
@@ -94,7 +136,7 @@ impl TentativeSteps {
             self.left -= seg;
             None
         } else {
-            Some(t + self.left / m)
+            Some(advance(t, self.left / m, b))
         }
     }
 
