@@ -21,6 +21,7 @@ use super::backend::{Estimator, Snapshot};
 use crate::atomic::write_atomically;
 use crate::render::export::{extension, write_png_bytes};
 use crate::render::tonemap::to_srgb8;
+use crate::render::Prepared;
 use crate::scene::{DensitySource, GridFormat, GridSource, Scene};
 
 /// Largest number of recent files remembered.
@@ -74,6 +75,9 @@ pub struct Loaded {
     pub is_scene_file: bool,
     /// The medium's world box.
     pub bounds: (Vec3, Vec3),
+    /// What makes the picture meaningless or the work very long
+    /// ([`crate::render::limits::warnings`]), shown as notifications.
+    pub warnings: Vec<String>,
 }
 
 /// Whether a dropped file is something the previewer opens.
@@ -112,12 +116,19 @@ pub fn load(path: &Path, current: &Scene) -> Result<Loaded, String> {
     let density = scene
         .load_density(&dir)
         .map_err(|e| format!("cannot open {}: {e:#}", path.display()))?;
+    let bounds = density.bounds();
+    let prepared = Prepared::with_density(scene.clone(), density);
+    let warnings = crate::render::limits::warnings(&prepared, &scene.render)
+        .into_iter()
+        .map(|w| format!("{}: {w}", path.display()))
+        .collect();
     Ok(Loaded {
         path: path.to_owned(),
         scene,
         scene_dir: dir,
         is_scene_file,
-        bounds: density.bounds(),
+        bounds,
+        warnings,
     })
 }
 
