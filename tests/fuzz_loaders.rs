@@ -5,7 +5,8 @@
 //!
 //! - never a panic (each load runs on its own thread, whose panic fails
 //!   the case);
-//! - never a hang: each load must finish within [`CASE_SECONDS`];
+//! - never a hang: each load must finish within [`CASE_SECONDS`] (plus a
+//!   little per voxel of a large grid it returns);
 //! - never an allocation beyond a bound: a counting global allocator
 //!   records the loading thread's peak of live bytes, which must stay
 //!   within [`alloc_bound`] (a few MiB plus a small multiple of the input,
@@ -32,8 +33,16 @@ use proptest::test_runner::{Config, TestCaseError, TestRunner};
 /// two cores, in release).
 const DEFAULT_CASES: u32 = 5000;
 
-/// Longest a single load may take.
+/// Longest a single load may take, plus [`SECONDS_PER_VOXEL`] for each
+/// voxel of the grid it returns (a small OpenVDB file can legitimately
+/// describe a large dense grid: a mutated tile or bounding box).
 const CASE_SECONDS: f64 = 2.0;
+
+/// Time allowed per voxel returned, on top of [`CASE_SECONDS`].
+const SECONDS_PER_VOXEL: f64 = 2e-7;
+
+/// Past this a load is a hang whatever it returns.
+const HANG_SECONDS: f64 = 30.0;
 
 // ---------------------------------------------------------------------------
 // A counting allocator: live bytes and their peak, per thread.
@@ -137,14 +146,23 @@ fn run_case(
             let _ = tx.send((result, peak));
         })
         .map_err(|e| TestCaseError::fail(format!("cannot start a thread: {e}")))?;
-    match rx.recv_timeout(Duration::from_secs_f64(CASE_SECONDS)) {
+    match rx.recv_timeout(Duration::from_secs_f64(HANG_SECONDS)) {
         Ok((result, peak)) => {
             let _ = handle.join();
-            Ok(Outcome {
-                result,
-                peak,
-                secs: start.elapsed().as_secs_f64(),
-            })
+            let secs = start.elapsed().as_secs_f64();
+            let voxels = result
+                .as_ref()
+                .ok()
+                .and_then(Option::as_ref)
+                .map_or(0, |g: &VoxelGrid| g.data.len());
+            let allowed = CASE_SECONDS + SECONDS_PER_VOXEL * voxels as f64;
+            if secs > allowed {
+                return Err(TestCaseError::fail(format!(
+                    "{what}: the load took {secs:.2} s, more than the {allowed:.2} s allowed \
+                     for a result of {voxels} voxels"
+                )));
+            }
+            Ok(Outcome { result, peak, secs })
         }
         Err(mpsc::RecvTimeoutError::Disconnected) => {
             // The thread ended without sending: it panicked.
@@ -162,7 +180,7 @@ fn run_case(
             )))
         }
         Err(mpsc::RecvTimeoutError::Timeout) => Err(TestCaseError::fail(format!(
-            "{what}: the load took more than {CASE_SECONDS} s (a hang)"
+            "{what}: the load took more than {HANG_SECONDS} s (a hang)"
         ))),
     }
 }
@@ -609,4 +627,20 @@ fn mutations_change_the_seeds() {
     assert_eq!(spans, [&b"4"[..], b"3", b"2", b"-1.5e3", b"7"]);
     let m = mutate_text(text, &[TextMutation::Number(0, "1e30")], 0);
     assert!(m.starts_with(b"(dims: (1e30, 3"));
+}
+
+/// The allocation bound can fail: the counter sees what a thread
+/// allocates, and a load that allocated its header's claim would exceed
+/// the bound.
+#[test]
+fn the_allocation_counter_sees_large_allocations() {
+    let (v, peak) = peak_of(|| vec![1u8; 32 << 20]);
+    assert!(peak >= 32 << 20, "{peak}");
+    drop(v);
+    assert!(
+        peak > alloc_bound(144, None),
+        "a 144-byte file may not cost 32 MiB"
+    );
+    let (_, small) = peak_of(|| 1 + 1);
+    assert_eq!(small, 0);
 }

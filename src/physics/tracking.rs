@@ -62,9 +62,8 @@ pub fn sample_tentative_at_rate(
     rng: &mut Rng,
     mut event: impl FnMut(f32, f32, &mut Rng) -> bool,
 ) -> bool {
-    if !(origin.is_finite() && dir.is_finite() && t0.is_finite() && t1.is_finite())
-        || !(rate.is_finite() && rate > 0.0)
-    {
+    let finite = origin.is_finite() && dir.is_finite() && t0.is_finite() && t1.is_finite();
+    if !(finite && rate.is_finite() && rate > 0.0) {
         NON_FINITE.fetch_add(1, Ordering::Relaxed);
         return true;
     }
