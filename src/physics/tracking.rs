@@ -419,6 +419,103 @@ mod tests {
         assert!(rel_var[1] < 0.4, "rate 8: relative variance {}", rel_var[1]);
     }
 
+    /// Empty space under a majorant of 10⁶: the null collisions that a
+    /// far ray's `f32` parameter cannot separate.
+    struct EmptyUnderDenseMajorant;
+
+    impl DensityField for EmptyUnderDenseMajorant {
+        fn density(&self, _: Vec3) -> f32 {
+            0.0
+        }
+        fn bounds(&self) -> (Vec3, Vec3) {
+            (Vec3::splat(-1.0), Vec3::splat(1.0))
+        }
+        fn max_in_box(&self, _: Vec3, _: Vec3) -> f32 {
+            1e6
+        }
+    }
+
+    /// Runs `f` on a thread; fails if it takes more than 10 s.
+    fn within_10_s<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(f());
+        });
+        rx.recv_timeout(std::time::Duration::from_secs(10))
+            .expect("the flight never ended")
+    }
+
+    /// From 10⁷ away a mean free path of 10⁻⁶ is below the spacing of `f32`
+    /// values (1 at 10⁷): `t + step` rounded to `t` and the null collisions
+    /// went on forever. Each now moves the ray on by at least one step.
+    #[test]
+    fn flights_end_where_f32_cannot_resolve_a_mean_free_path() {
+        let (tr, hit) = within_10_s(|| {
+            let vol = Volume::new(
+                EmptyUnderDenseMajorant,
+                Optics {
+                    sigma_t: Vec3::ONE,
+                    albedo: Vec3::ONE,
+                    g: 0.0,
+                },
+                4,
+            );
+            let origin = Vec3::new(-1e7, 0.1, 0.2);
+            let mut rng = Rng::for_sample(1, 2, 3);
+            let tr = transmittance(&vol, origin, Vec3::X, f32::INFINITY, &mut rng);
+            let (t0, t1) = vol.clip(origin, Vec3::X).unwrap();
+            let mut w = Vec3::ONE;
+            let hit = free_flight(&vol, origin, Vec3::X, t0, t1, &mut w, &mut rng);
+            (tr, hit)
+        });
+        // Nothing there: all light passes.
+        assert_eq!(tr, Vec3::ONE);
+        assert_eq!(hit, None);
+    }
+
+    /// A ray that is not finite is refused at once (no tentative collision)
+    /// and counted, so that the command line can report it.
+    #[test]
+    fn non_finite_rays_are_refused_and_counted() {
+        let before = non_finite_flights();
+        let vol = ball(Vec3::ONE);
+        let mut rng = Rng::for_sample(0, 0, 0);
+        let mut called = false;
+        let reached = sample_tentative(
+            &vol.majorants,
+            Vec3::new(f32::NAN, 0.0, 0.0),
+            Vec3::X,
+            0.0,
+            1.0,
+            &mut rng,
+            |_, _, _| {
+                called = true;
+                true
+            },
+        );
+        assert!(reached && !called);
+        let reached = sample_tentative(
+            &vol.majorants,
+            Vec3::ZERO,
+            Vec3::X,
+            0.0,
+            f32::INFINITY,
+            &mut rng,
+            |_, _, _| true,
+        );
+        assert!(reached);
+        assert!(non_finite_flights() >= before + 2);
+    }
+
+    /// `advance` moves on by at least one `f32` step and never past `end`.
+    #[test]
+    fn advance_always_moves_on() {
+        assert_eq!(advance(1e7, 1e-6, 2e7), 1e7f32.next_up());
+        assert_eq!(advance(0.0, 0.0, 1.0), f32::MIN_POSITIVE.next_up());
+        assert_eq!(advance(1.0, 0.5, 1.25), 1.25);
+        assert_eq!(advance(1.0, 0.125, 2.0), 1.125);
+    }
+
     /// The probability that a spectral-tracking flight crosses the sphere,
     /// weighted, equals the transmittance per channel.
     #[test]
