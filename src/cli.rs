@@ -812,6 +812,13 @@ fn bench_command(
             scene.camera.height = s.height;
             scene.validate(&path)?;
         }
+        crate::render::limits::check_image_memory(
+            scene.camera.width,
+            scene.camera.height,
+            crate::render::limits::available_memory(),
+            &format!("{}: --size", path.display()),
+        )
+        .map_err(anyhow::Error::msg)?;
         scene.render.method = method;
         internal.apply(&mut scene.render.internal);
         scene.render.internal.validate(&path)?;
