@@ -405,10 +405,15 @@ fn open_previewer(scene: Option<PathBuf>) -> Result<()> {
     })
 }
 
+/// Sizes the global thread pool for `--threads` (checked against the
+/// cores first: [`crate::render::limits::check_threads`]).
 fn set_threads(threads: Option<usize>) -> Result<()> {
     if let Some(n) = threads {
-        if n == 0 {
-            bail!("--threads must be at least 1");
+        let cores = crate::render::limits::cores();
+        if let Some(warning) =
+            crate::render::limits::check_threads(n, cores).map_err(anyhow::Error::msg)?
+        {
+            eprintln!("warning: {warning}");
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -447,8 +452,19 @@ fn render_command(
     if spp == Some(0) {
         bail!("--spp must be at least 1");
     }
+    // Before any work: the output can be written, and the image fits.
+    crate::atomic::check_writable(out)?;
     let t_load = Instant::now();
-    let prepared = Arc::new(load_prepared(scene_path)?);
+    let scene = Scene::load(scene_path)?;
+    crate::render::limits::check_image_memory(
+        scene.camera.width,
+        scene.camera.height,
+        crate::render::limits::available_memory(),
+        &format!("{}: camera.width/height", scene_path.display()),
+    )
+    .map_err(anyhow::Error::msg)?;
+    let dir = scene_path.parent().unwrap_or(Path::new("."));
+    let prepared = Arc::new(Prepared::new(scene, dir)?);
     let load_secs = t_load.elapsed().as_secs_f64();
     let mut settings = prepared.scene.render.clone();
     if let Some(m) = method {
@@ -465,6 +481,9 @@ fn render_command(
         .internal
         .validate(scene_path)
         .context("invalid internal-lights parameter on the command line")?;
+    for warning in crate::render::limits::warnings(&prepared, &settings) {
+        eprintln!("warning: {warning}");
+    }
     if backend == BackendArg::Gpu {
         return render_gpu(
             scene_path, &prepared, &settings, load_secs, out, exposure, view,
@@ -508,9 +527,13 @@ fn render_command(
             .context("render was cancelled")?;
         film.add_pass(&img.total);
         single.add_pass(&img.single);
+        if pass == 0 {
+            warn_long_render(start.elapsed().as_secs_f64(), spp);
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
+    check_flights()?;
     let sets = spp
         .checked_sub(1)
         .map_or(0, |last| light_set(&settings, last));
@@ -539,6 +562,38 @@ fn render_command(
         out.display()
     );
     print_parts(mean, single.image_mean(), method);
+    Ok(())
+}
+
+/// Renders estimated from the first pass to take longer than this (in
+/// seconds) are announced with the estimate.
+const LONG_RENDER_SECS: f64 = 600.0;
+
+/// After the first pass (`first` seconds): warns with the estimated time of
+/// all `spp` passes if it is long.
+fn warn_long_render(first: f64, spp: u32) {
+    let total = first * spp as f64;
+    if total > LONG_RENDER_SECS {
+        eprintln!(
+            "warning: the first pass took {first:.3} s, so {spp} passes will take about {} \
+             (lower --spp for a shorter render)",
+            crate::render::limits::duration(total)
+        );
+    }
+}
+
+/// Fails if any flight was refused for a non-finite ray (see
+/// [`crate::physics::tracking::non_finite_flights`]): the image would be
+/// wrong, so it is not written over a good one.
+fn check_flights() -> Result<()> {
+    let n = crate::physics::tracking::non_finite_flights();
+    if n > 0 {
+        bail!(
+            "{n} rays met non-finite values (an infinite or NaN position, direction or \
+             distance) and were skipped: the image would be wrong, so it was not written; \
+             please report the scene"
+        );
+    }
     Ok(())
 }
 
@@ -625,6 +680,9 @@ fn render_gpu(
         // Waiting after each pass keeps the progress bar honest and the
         // queue short; the accumulation itself stays on the GPU.
         renderer.finish()?;
+        if pass == 0 {
+            warn_long_render(start.elapsed().as_secs_f64(), settings.spp);
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -786,6 +844,13 @@ fn bench_command(
             scene.camera.height = s.height;
             scene.validate(&path)?;
         }
+        crate::render::limits::check_image_memory(
+            scene.camera.width,
+            scene.camera.height,
+            crate::render::limits::available_memory(),
+            &format!("{}: --size", path.display()),
+        )
+        .map_err(anyhow::Error::msg)?;
         scene.render.method = method;
         internal.apply(&mut scene.render.internal);
         scene.render.internal.validate(&path)?;

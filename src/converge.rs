@@ -319,6 +319,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
     let out_dir = output_dir(&args.out, &args.scene);
     std::fs::create_dir_all(&out_dir)
         .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    crate::atomic::check_writable(&out_dir.join("curves.csv"))?;
     let stem = out_dir
         .file_name()
         .map(|s| s.to_string_lossy().into_owned())
@@ -333,12 +334,18 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
 
     let (converged, converged_var) = match &args.converged {
         Some(path) => {
-            let read = |p: &std::path::Path| {
-                read_exr(p).with_context(|| format!("cannot read {}", p.display()))
-            };
-            let mean = read(path)?;
+            let mean = read_exr(path).context(
+                "--converged names the converged image (converged.exr of an earlier run)",
+            )?;
             let var_path = path.with_file_name("converged_var.exr");
-            let var = read(&var_path)?;
+            let var = read_exr(&var_path).with_context(|| {
+                format!(
+                    "--converged {} also needs its per-pixel variance of the mean, \
+                     converged_var.exr in the same folder, as an earlier `lantern converge` \
+                     writes beside converged.exr",
+                    path.display()
+                )
+            })?;
             let (cw, ch, vw, vh) = (mean.width, mean.height, var.width, var.height);
             if (cw, ch) != (w, h) || (vw, vh) != (w, h) {
                 bail!(
@@ -411,8 +418,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
         }
     }
     let csv_path = out_dir.join("curves.csv");
-    std::fs::write(&csv_path, &csv)
-        .with_context(|| format!("cannot write {}", csv_path.display()))?;
+    crate::atomic::write_bytes(&csv_path, csv.as_bytes())?;
     let mut plot = Plot::new(
         &format!("{stem} {w}x{h}: RMSE against time"),
         "seconds",
@@ -560,8 +566,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
         }
     }
     print!("{report}");
-    std::fs::write(out_dir.join("report.md"), &report)
-        .with_context(|| format!("cannot write {}", out_dir.join("report.md").display()))?;
+    crate::atomic::write_bytes(&out_dir.join("report.md"), report.as_bytes())?;
     eprintln!("{stem}: wrote {}", out_dir.display());
     Ok(())
 }

@@ -17,13 +17,16 @@
 //! gpu/      the wgpu backend: headless device, GPU mirrors, compute pipelines
 //! ui/       the interactive previewer (eframe, egui, rfd): the only UI code
 //! cli.rs    headless rendering, export and benchmarks
+//! atomic.rs files written whole or not at all (every writer uses it)
 //! ```
 //!
-//! `scene` and `physics` are leaves and never import each other; `render`
+//! `scene` and `physics` are leaves and never import each other (`scene`
+//! writes its files through `atomic`, which uses only `std`); `render`
 //! uses both; `cpu` and `gpu` use `render`; only `cli` and `ui` sit on
 //! top.
 //! Renderers know nothing of any user interface.
 
+pub mod atomic;
 pub mod cli;
 pub mod converge;
 pub mod cpu;

@@ -131,6 +131,18 @@ pub fn render_timed(
 /// (0 keeps the scene's camera size).
 pub fn load_square(scene: &Path, size: u32) -> Result<Prepared> {
     let prepared = load_prepared(scene)?;
+    let (w, h) = if size == 0 {
+        (prepared.camera.width, prepared.camera.height)
+    } else {
+        (size, size)
+    };
+    crate::render::limits::check_image_memory(
+        w,
+        h,
+        crate::render::limits::available_memory(),
+        "--size",
+    )
+    .map_err(anyhow::Error::msg)?;
     if size == 0 {
         return Ok(prepared);
     }
@@ -157,6 +169,7 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
         .unwrap_or_default();
     std::fs::create_dir_all(&out_dir)
         .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    crate::atomic::check_writable(&out_dir.join("table.md"))?;
     let (w, h) = (prepared.camera.width, prepared.camera.height);
 
     let mut base = prepared.scene.render.clone();
@@ -219,8 +232,7 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
 
     let table = format_table(&stem, &base, s0, args, w, h, ref_secs, &rows);
     print!("{table}");
-    std::fs::write(out_dir.join("table.md"), &table)
-        .with_context(|| format!("cannot write {}", out_dir.join("table.md").display()))?;
+    crate::atomic::write_bytes(&out_dir.join("table.md"), table.as_bytes())?;
     for sweep in ["s*", "N", "M"] {
         let sel: Vec<&Row> = rows.iter().filter(|r| r.sweep == sweep).collect();
         if sel.len() < 2 {

@@ -1209,3 +1209,73 @@ fn renewed_light_set_replaces_the_gpu_lights() {
     assert!(worst_same <= 1e-4 * scale, "{worst_same} vs {scale}");
     assert!(worst_kept > 0.05 * scale, "{worst_kept} vs {scale}");
 }
+
+// ---------------------------------------------------------------------------
+// Issue 23: the GPU tracks what the CPU tracks, and ends as fast.
+
+/// A 24² scene from `text`'s medium and lights, prepared with `density`.
+fn issue23_scene(lights: &str, density_scale: f32) -> lantern::scene::Scene {
+    let text = format!(
+        r#"(
+        camera: (eye: (0.0, 0.0, 3.5), target: (0.0, 0.0, 0.0), up: (0.0, 1.0, 0.0), fov_y_deg: 40.0, width: 24, height: 24),
+        medium: (
+            density: Sphere(center: (0.0, 0.0, 0.0), radius: 1.0),
+            density_scale: {density_scale:e},
+            sigma_t: (1.0, 1.0, 1.0),
+            albedo: (0.9, 0.9, 0.9),
+            g: 0.5,
+        ),
+        lights: [{lights}],
+    )"#
+    );
+    lantern::scene::Scene::from_ron(&text, Path::new("issue23.ron")).unwrap()
+}
+
+const ISSUE23_SUN: &str = "Sun(direction: (0.6, -1.0, -0.5), irradiance: (3.0, 3.0, 3.0))";
+
+/// Both backends' reference images of `prepared`, compared; the GPU side
+/// must finish within `secs` of its own time.
+fn issue23_agree(label: &str, prepared: Prepared, spp: u32, secs: f64) {
+    let Some(ctx) = common::gpu() else { return };
+    let prepared = Arc::new(prepared);
+    let cpu = common::render(&prepared, Method::Reference, 1, spp);
+    let t = Instant::now();
+    let mut renderer =
+        GpuRenderer::reference(&ctx, &prepared, 2).unwrap_or_else(|e| panic!("{e:#}"));
+    let image = common::gpu_render(&mut renderer, spp);
+    let gpu_secs = t.elapsed().as_secs_f64();
+    assert!(gpu_secs < secs, "{label}: the GPU took {gpu_secs:.2} s");
+    common::compare_backends(label, &image, &cpu, &format!("GPU {gpu_secs:.2} s"));
+}
+
+/// One voxel of 10⁸ in an 8³ grid: clamped (`MAX_DEPTH_PER_VOXEL`) on
+/// both backends alike, so the GPU renders it at once (it took 3.5 s at
+/// 10⁶ before) and agrees with the CPU.
+#[test]
+fn issue23_dense_voxel_agrees_and_is_quick() {
+    let mut data = vec![0.0f32; 512];
+    data[4 + 8 * (4 + 8 * 4)] = 1e8;
+    let grid = lantern::scene::VoxelGrid {
+        dims: glam::UVec3::splat(8),
+        bounds_min: Vec3::splat(-1.0),
+        bounds_max: Vec3::splat(1.0),
+        data,
+    };
+    let prepared = Prepared::with_density(
+        issue23_scene(ISSUE23_SUN, 1.0),
+        lantern::scene::Density::Grid(Arc::new(grid)),
+    );
+    assert!(prepared.dense.is_some());
+    issue23_agree("dense voxel 1e8", prepared, 64, 60.0);
+}
+
+/// `density_scale` 10²⁰ (an opaque sphere, not a black one) and a point
+/// light at 3·10¹⁹ beside the sun: the same image on both backends.
+#[test]
+fn issue23_opaque_sphere_and_far_light_agree() {
+    let lights =
+        format!("{ISSUE23_SUN}, Point(position: (3e19, 0.0, 0.0), intensity: (1e38, 1e38, 1e38))");
+    let prepared = Prepared::new(issue23_scene(&lights, 1e20), Path::new(".")).unwrap();
+    assert!(prepared.dense.is_some());
+    issue23_agree("opaque sphere, far light", prepared, 64, 60.0);
+}

@@ -149,6 +149,50 @@ fn a_bad_scene_file_keeps_the_current_scene_and_says_why() {
     assert!(toast.text.contains("broken.ron"), "{}", toast.text);
 }
 
+/// A scene the renderers must clamp (a medium far denser than they march)
+/// opens, with a notification saying what was done (issue 23); a volume
+/// path that is a folder is refused and the scene kept.
+#[test]
+fn a_clamped_medium_opens_with_a_warning_and_a_folder_is_refused() {
+    let mut h = harness();
+    h.run_steps(1);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut scene = lantern::scene::Scene::default();
+    scene.medium.density = lantern::scene::DensitySource::Sphere {
+        center: glam::Vec3::ZERO,
+        radius: 1.0,
+    };
+    scene.medium.density_scale = 1e20;
+    let path = dir.path().join("opaque.ron");
+    scene.save(&path).expect("save");
+    h.state_mut().open_now(&path);
+    h.run_steps(1);
+    assert_eq!(h.state().doc.scene.medium.density_scale, 1e20);
+    let toast = h
+        .state()
+        .toasts
+        .iter()
+        .find(|t| t.text.contains("warning"))
+        .expect("a warning");
+    assert!(
+        toast.text.contains("opaque.ron") && toast.text.contains("opaque lit surface"),
+        "{}",
+        toast.text
+    );
+    std::fs::create_dir(dir.path().join("cloud.vdb")).expect("folder");
+    let before = h.state().doc.clone();
+    h.state_mut().open_now(&dir.path().join("cloud.vdb"));
+    assert_eq!(h.state().doc, before);
+    assert!(
+        h.state()
+            .toasts
+            .iter()
+            .any(|t| t.error && t.text.contains("is a folder")),
+        "{:?}",
+        h.state().toasts.iter().map(|t| &t.text).collect::<Vec<_>>()
+    );
+}
+
 #[test]
 fn split_and_error_views_render_both_estimators_and_show_the_rmse() {
     let mut h = harness();

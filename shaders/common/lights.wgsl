@@ -4,6 +4,8 @@
 
 // Smallest squared distance to a point light (`MIN_DIST2`).
 const MIN_DIST2: f32 = 1e-8;
+// Beyond this offset along an axis a light is far (`FAR_LIGHT`).
+const FAR_LIGHT: f32 = 1e19;
 
 // The light arriving at a point from one external light (`LightSample`).
 struct LightSample {
@@ -28,7 +30,14 @@ fn light_at(i: u32, p: vec3<f32>) -> LightSample {
         return LightSample(l.vector, BIG, l.power);
     }
     let v = p - l.vector;
-    let d2 = max(dot(v, v), MIN_DIST2);
-    let d = sqrt(d2);
-    return LightSample(v / d, d, l.power / d2);
+    let s = max_element(abs(v));
+    if s <= FAR_LIGHT {
+        let d2 = max(dot(v, v), MIN_DIST2);
+        let d = sqrt(d2);
+        return LightSample(v / d, d, l.power / d2);
+    }
+    // A far light (`point_sample`): `|v|²` would overflow.
+    let u = v / s;
+    let lu = length(u);
+    return LightSample(u / lu, min(s * lu, BIG), l.power / s / lu / s / lu);
 }

@@ -9,6 +9,8 @@
 // - `free_flight`: spectral tracking (Kutz et al. 2017, "max" probabilities).
 // - `transmittance`: ratio tracking (Novák et al. 2014) with Russian
 //   roulette once the estimate is small.
+// Every tentative collision advances the ray by at least one f32 step
+// (`tentative_advance`), as on the CPU, so no flight can stall.
 
 // The state of a tentative-collision sampler along one ray.
 struct TentativeSampler {
@@ -99,12 +101,20 @@ fn sample_tentative_next(s: ptr<function, TentativeSampler>, rng: ptr<function, 
             (*s).has_segment = false;
             continue;
         }
-        (*s).t += (*s).tau / m;
+        (*s).t = tentative_advance((*s).t, (*s).tau / m, (*s).seg_t1);
         (*s).redraw = true;
         return TentativeCollision((*s).t, m, true);
     }
     // Unreachable: the loop only returns.
     return TentativeCollision(0.0, 0.0, false);
+}
+
+// `t + step`, at least one f32 step beyond `t` (and beyond the smallest
+// normal f32), at most `end` (`tracking::advance`): every tentative
+// collision moves the ray on, so a flight ends on any finite input.
+fn tentative_advance(t: f32, step: f32, end: f32) -> f32 {
+    let next_up = bitcast<f32>(bitcast<u32>(max(t, 1.17549435e-38)) + 1u);
+    return min(max(t + step, next_up), end);
 }
 
 // Where a free flight ended: a real collision at `t`, or none.

@@ -45,6 +45,40 @@ pub struct LightSample {
 /// Smallest squared distance to a point light, so that `1/r²` stays finite.
 const MIN_DIST2: f32 = 1e-8;
 
+/// Beyond this offset along an axis a point light is "far": `|v|²` could
+/// overflow `f32` (`(10¹⁹)² = 10³⁸` of `3.4·10³⁸`), so its distance and
+/// direction are computed from `v` scaled down by its largest component.
+pub const FAR_LIGHT: f32 = 1e19;
+
+/// The arrival from a point light of `intensity` at offset `v` (from the
+/// light to the point). Exact for any finite `v`: a light at `3·10¹⁹` once
+/// gave an infinite `|v|²`, a zero direction and a shadow ray of infinite
+/// length whose tracking never ended.
+#[inline]
+pub fn point_sample(v: Vec3, intensity: Vec3) -> LightSample {
+    let s = v.abs().max_element();
+    if s <= FAR_LIGHT {
+        let d2 = v.length_squared().max(MIN_DIST2);
+        let d = d2.sqrt();
+        return LightSample {
+            travel: v / d,
+            distance: d,
+            irradiance: intensity / d2,
+        };
+    }
+    // `u` has components in [−1, 1], one of them ±1: `|u| ∈ [1, √3]`.
+    let u = v / s;
+    let lu = u.length();
+    LightSample {
+        travel: u / lu,
+        // Past `f32::MAX` only for `s > 1.96·10³⁸`; the shadow ray is
+        // clipped to the medium's box, so the largest finite length does.
+        distance: (s * lu).min(f32::MAX),
+        // `I / d²` without forming `d²`.
+        irradiance: intensity / s / lu / s / lu,
+    }
+}
+
 impl Lights {
     /// Calls `f` once per light with its unattenuated arrival at `p`.
     #[inline]
@@ -57,14 +91,7 @@ impl Lights {
             });
         }
         for l in &self.points {
-            let v = p - l.position;
-            let d2 = v.length_squared().max(MIN_DIST2);
-            let d = d2.sqrt();
-            f(LightSample {
-                travel: v / d,
-                distance: d,
-                irradiance: l.intensity / d2,
-            });
+            f(point_sample(p - l.position, l.intensity));
         }
     }
 

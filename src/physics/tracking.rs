@@ -9,6 +9,21 @@
 //!   reduces to plain delta tracking when the channels agree.
 //! - [`transmittance`]: ratio tracking (Novák et al. 2014) with an unbiased
 //!   Russian roulette once the estimate is small.
+//!
+//! ## Bounded on any finite input
+//!
+//! Each tentative collision advances the ray by at least one `f32` step
+//! ([`advance`]): where a mean free path is shorter than the spacing of
+//! representable distances (a camera far from a dense medium), the
+//! position could otherwise stop moving while null collisions went on
+//! forever. With the majorant finite (the renderers clamp media denser
+//! than `render::prepared::MAX_DEPTH_PER_VOXEL`), a flight over `[t0, t1]`
+//! therefore takes at most about `majorant · (t1 − t0)` steps on average
+//! and never more than the number of `f32` values in between. A ray or
+//! interval that is not finite is refused: no tentative collision, and
+//! [`non_finite_flights`] counts it so that the caller can say so.
+
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::Vec3;
 
@@ -47,6 +62,11 @@ pub fn sample_tentative_at_rate(
     rng: &mut Rng,
     mut event: impl FnMut(f32, f32, &mut Rng) -> bool,
 ) -> bool {
+    let finite = origin.is_finite() && dir.is_finite() && t0.is_finite() && t1.is_finite();
+    if !(finite && rate.is_finite() && rate > 0.0) {
+        NON_FINITE.fetch_add(1, Ordering::Relaxed);
+        return true;
+    }
     let mut steps = TentativeSteps::new(rng);
     grid.walk(origin, dir, t0, t1, |a, b, m| {
         let m = m * rate;
@@ -60,6 +80,27 @@ pub fn sample_tentative_at_rate(
         }
         true
     })
+}
+
+/// Flights refused because their ray or interval was not finite.
+static NON_FINITE: AtomicU64 = AtomicU64::new(0);
+
+/// How many flights (free flights and transmittance estimates) this
+/// process refused because their ray or interval was not finite: zero for
+/// every validated scene; the command line reports any as an error in the
+/// image.
+pub fn non_finite_flights() -> u64 {
+    NON_FINITE.load(Ordering::Relaxed)
+}
+
+/// The position `t + step` of the next tentative collision, at least one
+/// `f32` step beyond `t` (and beyond the smallest normal `f32`), and at
+/// most `end`. Where `step` is below the spacing of `f32` values at `t` the
+/// exact position cannot be represented anyway; moving on guarantees that
+/// the walk ends. The WGSL `tentative_advance` is the same.
+#[inline]
+pub fn advance(t: f32, step: f32, end: f32) -> f32 {
+    (t + step).max(t.max(f32::MIN_POSITIVE).next_up()).min(end)
 }
 
 /// The exponential steps between tentative collisions against a majorant
@@ -86,7 +127,7 @@ impl TentativeSteps {
     /// majorant `m`, or `None` having used up the stretch.
     #[inline]
     pub fn next(&mut self, t: f32, b: f32, m: f32) -> Option<f32> {
-        if m <= 0.0 {
+        if m.is_nan() || m <= 0.0 {
             return None;
         }
         let seg = m * (b - t);
@@ -94,7 +135,7 @@ impl TentativeSteps {
             self.left -= seg;
             None
         } else {
-            Some(t + self.left / m)
+            Some(advance(t, self.left / m, b))
         }
     }
 
@@ -376,6 +417,103 @@ pub(crate) mod tests {
         // e^{1/4} − 1 = 0.28.
         assert!(rel_var[0] > 5.0, "rate 1: relative variance {}", rel_var[0]);
         assert!(rel_var[1] < 0.4, "rate 8: relative variance {}", rel_var[1]);
+    }
+
+    /// Empty space under a majorant of 10⁶: the null collisions that a
+    /// far ray's `f32` parameter cannot separate.
+    struct EmptyUnderDenseMajorant;
+
+    impl DensityField for EmptyUnderDenseMajorant {
+        fn density(&self, _: Vec3) -> f32 {
+            0.0
+        }
+        fn bounds(&self) -> (Vec3, Vec3) {
+            (Vec3::splat(-1.0), Vec3::splat(1.0))
+        }
+        fn max_in_box(&self, _: Vec3, _: Vec3) -> f32 {
+            1e6
+        }
+    }
+
+    /// Runs `f` on a thread; fails if it takes more than 10 s.
+    fn within_10_s<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(f());
+        });
+        rx.recv_timeout(std::time::Duration::from_secs(10))
+            .expect("the flight never ended")
+    }
+
+    /// From 10⁷ away a mean free path of 10⁻⁶ is below the spacing of `f32`
+    /// values (1 at 10⁷): `t + step` rounded to `t` and the null collisions
+    /// went on forever. Each now moves the ray on by at least one step.
+    #[test]
+    fn flights_end_where_f32_cannot_resolve_a_mean_free_path() {
+        let (tr, hit) = within_10_s(|| {
+            let vol = Volume::new(
+                EmptyUnderDenseMajorant,
+                Optics {
+                    sigma_t: Vec3::ONE,
+                    albedo: Vec3::ONE,
+                    g: 0.0,
+                },
+                4,
+            );
+            let origin = Vec3::new(-1e7, 0.1, 0.2);
+            let mut rng = Rng::for_sample(1, 2, 3);
+            let tr = transmittance(&vol, origin, Vec3::X, f32::INFINITY, &mut rng);
+            let (t0, t1) = vol.clip(origin, Vec3::X).unwrap();
+            let mut w = Vec3::ONE;
+            let hit = free_flight(&vol, origin, Vec3::X, t0, t1, &mut w, &mut rng);
+            (tr, hit)
+        });
+        // Nothing there: all light passes.
+        assert_eq!(tr, Vec3::ONE);
+        assert_eq!(hit, None);
+    }
+
+    /// A ray that is not finite is refused at once (no tentative collision)
+    /// and counted, so that the command line can report it.
+    #[test]
+    fn non_finite_rays_are_refused_and_counted() {
+        let before = non_finite_flights();
+        let vol = ball(Vec3::ONE);
+        let mut rng = Rng::for_sample(0, 0, 0);
+        let mut called = false;
+        let reached = sample_tentative(
+            &vol.majorants,
+            Vec3::new(f32::NAN, 0.0, 0.0),
+            Vec3::X,
+            0.0,
+            1.0,
+            &mut rng,
+            |_, _, _| {
+                called = true;
+                true
+            },
+        );
+        assert!(reached && !called);
+        let reached = sample_tentative(
+            &vol.majorants,
+            Vec3::ZERO,
+            Vec3::X,
+            0.0,
+            f32::INFINITY,
+            &mut rng,
+            |_, _, _| true,
+        );
+        assert!(reached);
+        assert!(non_finite_flights() >= before + 2);
+    }
+
+    /// `advance` moves on by at least one `f32` step and never past `end`.
+    #[test]
+    fn advance_always_moves_on() {
+        assert_eq!(advance(1e7, 1e-6, 2e7), 1e7f32.next_up());
+        assert_eq!(advance(0.0, 0.0, 1.0), f32::MIN_POSITIVE.next_up());
+        assert_eq!(advance(1.0, 0.5, 1.25), 1.25);
+        assert_eq!(advance(1.0, 0.125, 2.0), 1.125);
     }
 
     /// The probability that a spectral-tracking flight crosses the sphere,

@@ -7,6 +7,7 @@
 
 pub mod export;
 pub mod film;
+pub mod limits;
 pub mod plot;
 pub mod prepared;
 pub mod tonemap;

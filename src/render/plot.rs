@@ -203,11 +203,17 @@ impl Plot {
         img
     }
 
-    /// Writes the plot as a PNG file.
+    /// Writes the plot as a PNG file (whole or not at all).
     pub fn save(&self, path: &Path) -> Result<()> {
-        self.render()
-            .save(path)
-            .with_context(|| format!("cannot write the plot {}", path.display()))
+        let img = self.render();
+        super::export::write_png_bytes(
+            path,
+            img.as_raw(),
+            img.width(),
+            img.height(),
+            image::ExtendedColorType::Rgb8,
+        )
+        .context("cannot write the plot")
     }
 }
 

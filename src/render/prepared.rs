@@ -38,6 +38,153 @@ impl DensityField for Density {
     }
 }
 
+/// The largest optical depth per voxel that the renderers march: denser
+/// media have their extinction clamped to it (see [`DenseLimit`]).
+///
+/// At this depth one voxel transmits `e^{-100} ≈ 3.7·10⁻⁴⁴`, below the
+/// smallest normal `f32` (`1.2·10⁻³⁸`): as opaque as the estimators' `f32`
+/// arithmetic can say. Denser voxels only move the medium's lit surface
+/// less than a hundredth of a voxel further out, while delta and ratio
+/// tracking take about one step per unit of majorant optical depth, so a
+/// voxel of `σ_t ρ = 10⁶` per unit length would cost millions of steps per
+/// ray (the hang of issue 23) and a `density_scale` of `10²⁰` overflows
+/// `f32` in spectral tracking's probabilities (a black image).
+pub const MAX_DEPTH_PER_VOXEL: f32 = 100.0;
+
+/// A medium denser than [`MAX_DEPTH_PER_VOXEL`], and what was done: its
+/// extinction is clamped to `limit` per unit length, so that it renders as
+/// the opaque lit surface it is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DenseLimit {
+    /// The largest extinction of the medium as given, per unit length
+    /// (`density_scale · max σ_t · max ρ`).
+    pub peak: f64,
+    /// The extinction it is clamped to, per unit length:
+    /// [`MAX_DEPTH_PER_VOXEL`] over `voxel`.
+    pub limit: f64,
+    /// The length the limit refers to: the smallest side of a voxel (for
+    /// the analytic shapes, of a majorant cell).
+    pub voxel: f32,
+    /// The fraction of voxels that were clamped (1 for analytic shapes).
+    pub clamped_fraction: f64,
+}
+
+impl std::fmt::Display for DenseLimit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "the extinction reaches {:.3e} per unit length (density_scale × σ_t × density), \
+             {:.1e} mean free paths across a voxel of {:.3e} (for a sphere or box, a \
+             {MAJORANT_CELLS}th of its size), more than the {MAX_DEPTH_PER_VOXEL} the renderers \
+             march; clamped to {:.3e} per unit length",
+            self.peak,
+            self.peak * self.voxel as f64,
+            self.voxel,
+            self.limit,
+        )?;
+        if self.clamped_fraction < 1.0 {
+            write!(
+                f,
+                " in {:.3} % of the voxels",
+                100.0 * self.clamped_fraction
+            )?;
+        }
+        write!(f, ", where the medium renders as an opaque lit surface")
+    }
+}
+
+/// The length a medium's density varies over: a voxel's smallest side
+/// for a grid, a majorant cell's for the analytic shapes (whose density
+/// is constant inside).
+pub fn feature_length(density: &Density) -> f32 {
+    match density {
+        Density::Grid(g) => g.voxel_size().min_element(),
+        _ => {
+            let (lo, hi) = density.bounds();
+            (hi - lo).max_element() / MAJORANT_CELLS as f32
+        }
+    }
+}
+
+/// The optics of `medium` over `density`, with extinction above
+/// [`MAX_DEPTH_PER_VOXEL`] clamped (then the density and what was done
+/// are returned changed). Media within the limit keep their density and
+/// `σ_t · density_scale` exactly.
+fn clamp_dense(
+    medium: &crate::scene::Medium,
+    density: Density,
+) -> (Optics, Density, Option<DenseLimit>) {
+    let sigma = medium.sigma_t.as_dvec3() * medium.density_scale as f64;
+    let plain = Optics {
+        sigma_t: medium.sigma_t * medium.density_scale,
+        albedo: medium.albedo,
+        g: medium.g,
+    };
+    let voxel = feature_length(&density);
+    let limit = MAX_DEPTH_PER_VOXEL as f64 / voxel.max(f32::MIN_POSITIVE) as f64;
+    let sigma_max = sigma.max_element();
+    let finite = plain.sigma_t.is_finite();
+    match density {
+        Density::Grid(grid) => {
+            let peak = sigma_max * grid.max_value() as f64;
+            if peak <= limit && finite {
+                return (plain, Density::Grid(grid), None);
+            }
+            // ρ' = min(ρ σ_max / limit, 1) and σ' = σ limit / σ_max: the
+            // same product σ'ρ' = σρ below the limit, the limit above it,
+            // every factor finite.
+            let k = sigma_max / limit;
+            let mut clamped = 0usize;
+            let data: Vec<f32> = grid
+                .data
+                .iter()
+                .map(|&v| {
+                    let scaled = v as f64 * k;
+                    if scaled > 1.0 {
+                        clamped += 1;
+                        1.0
+                    } else {
+                        scaled as f32
+                    }
+                })
+                .collect();
+            let fraction = clamped as f64 / grid.data.len().max(1) as f64;
+            let grid = crate::scene::VoxelGrid {
+                data,
+                ..(*grid).clone()
+            };
+            let optics = Optics {
+                sigma_t: (sigma * (limit / sigma_max)).as_vec3(),
+                ..plain
+            };
+            let note = (peak > limit).then_some(DenseLimit {
+                peak,
+                limit,
+                voxel,
+                clamped_fraction: fraction,
+            });
+            (optics, Density::Grid(Arc::new(grid)), note)
+        }
+        analytic => {
+            // ρ is 0 or 1: clamp each channel.
+            if sigma_max <= limit && finite {
+                return (plain, analytic, None);
+            }
+            let optics = Optics {
+                sigma_t: sigma.min(glam::DVec3::splat(limit)).as_vec3(),
+                ..plain
+            };
+            let note = DenseLimit {
+                peak: sigma_max,
+                limit,
+                voxel,
+                clamped_fraction: 1.0,
+            };
+            (optics, analytic, Some(note))
+        }
+    }
+}
+
 /// Everything a renderer needs for one scene.
 pub struct Prepared {
     /// The scene as loaded (settings included).
@@ -48,6 +195,9 @@ pub struct Prepared {
     pub volume: SceneVolume,
     /// External lights.
     pub lights: Lights,
+    /// Set when the medium was denser than the renderers march and its
+    /// extinction was clamped (see [`MAX_DEPTH_PER_VOXEL`]).
+    pub dense: Option<DenseLimit>,
     /// The internal lights' placement density for one `u_mix` (its bits),
     /// built when first needed: like the majorant grid it depends on the
     /// medium only, so re-sampling after a change of `s*`, `M`, `N`, `K`,
@@ -63,14 +213,10 @@ impl Prepared {
         Ok(Self::with_density(scene, density))
     }
 
-    /// Builds from an already loaded density field.
+    /// Builds from an already loaded density field; a medium denser than
+    /// [`MAX_DEPTH_PER_VOXEL`] is clamped (and `dense` says so).
     pub fn with_density(scene: Scene, density: Density) -> Self {
-        let m = &scene.medium;
-        let optics = Optics {
-            sigma_t: m.sigma_t * m.density_scale,
-            albedo: m.albedo,
-            g: m.g,
-        };
+        let (optics, density, dense) = clamp_dense(&scene.medium, density);
         let volume = Volume::new(density, optics, MAJORANT_CELLS);
         let lights = lights_of(&scene.lights);
         Self {
@@ -78,6 +224,7 @@ impl Prepared {
             volume,
             lights,
             scene,
+            dense,
             placement: Mutex::new(None),
         }
     }

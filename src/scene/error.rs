@@ -56,6 +56,9 @@ pub enum SceneError {
         /// Why it failed.
         reason: String,
     },
+    /// A file could not be written whole; the previous one is unchanged.
+    #[error(transparent)]
+    WriteFile(#[from] crate::atomic::WriteError),
 }
 
 impl SceneError {

@@ -31,6 +31,54 @@ pub use settings::{ClockKind, InternalSettings, L1Kind, Method, Quality, RenderS
 /// Largest image side accepted, in pixels.
 pub const MAX_IMAGE_SIDE: u32 = 16384;
 
+/// Largest scene file read, in bytes: a scene is a few kilobytes of RON,
+/// so anything near this is not a scene (`lantern render /dev/zero` once
+/// read without end).
+pub const MAX_SCENE_BYTES: u64 = 4 << 20;
+
+/// Largest number of external lights in a scene: each scattering event
+/// traces a shadow ray to every light, so thousands make a render hundreds
+/// of times slower (more than a few dozen already draw a warning).
+pub const MAX_LIGHTS: usize = 1024;
+
+/// Reads the UTF-8 text file `path`, refusing (before reading further) a
+/// file longer than `limit` bytes; `what` names it in the message.
+pub fn read_text(path: &Path, limit: u64, what: &str) -> Result<String, SceneError> {
+    use std::io::Read;
+    let io = |reason| SceneError::Io {
+        path: path.to_owned(),
+        reason,
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    if file.metadata().map_err(io)?.is_dir() {
+        return Err(SceneError::Io {
+            path: path.to_owned(),
+            reason: std::io::Error::other(format!("is a folder, not a {what}")),
+        });
+    }
+    let mut bytes = Vec::new();
+    file.take(limit + 1).read_to_end(&mut bytes).map_err(io)?;
+    if bytes.len() as u64 > limit {
+        return Err(SceneError::Io {
+            path: path.to_owned(),
+            reason: std::io::Error::other(format!(
+                "is longer than {} MiB, far more than a {what} holds; not read further",
+                limit >> 20
+            )),
+        });
+    }
+    String::from_utf8(bytes).map_err(|e| SceneError::Io {
+        path: path.to_owned(),
+        reason: std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "is not UTF-8 text (byte {} is not), so it is not a {what}",
+                e.utf8_error().valid_up_to()
+            ),
+        ),
+    })
+}
+
 /// A whole scene, as stored in a `.ron` file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -151,10 +199,7 @@ impl Scene {
     /// Reads and validates a scene file. Grids are not loaded yet: see
     /// [`Scene::load_density`].
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|reason| SceneError::Io {
-            path: path.to_owned(),
-            reason,
-        })?;
+        let text = read_text(path, MAX_SCENE_BYTES, "scene file")?;
         Self::from_ron(&text, path)
     }
 
@@ -177,13 +222,11 @@ impl Scene {
         })
     }
 
-    /// Writes the scene as RON.
+    /// Writes the scene as RON, whole or not at all (a failed save leaves
+    /// the previous file unchanged and says so).
     pub fn save(&self, path: &Path) -> Result<(), SceneError> {
         let text = self.to_ron()?;
-        std::fs::write(path, text).map_err(|e| SceneError::Write {
-            path: path.to_owned(),
-            reason: e.to_string(),
-        })
+        crate::atomic::write_bytes(path, text.as_bytes()).map_err(SceneError::from)
     }
 
     /// Checks every value against its allowed range; `path` names the
@@ -286,6 +329,18 @@ impl Scene {
             }
         }
 
+        if self.lights.len() > MAX_LIGHTS {
+            return bad(
+                "lights",
+                format!(
+                    "{} external lights: at most {MAX_LIGHTS} are accepted, since every \
+                     scattering event traces a shadow ray to each (about {} times the work of \
+                     one light)",
+                    self.lights.len(),
+                    self.lights.len()
+                ),
+            );
+        }
         for (i, light) in self.lights.iter().enumerate() {
             match light {
                 Light::Sun {

@@ -116,6 +116,37 @@ pub struct Session {
     pub backend: Backend,
 }
 
+/// The session file's name, in eframe's storage folder for Lantern.
+pub const SESSION_FILE: &str = "session.ron";
+
+impl Session {
+    /// Where the session is kept: [`SESSION_FILE`] in eframe's storage
+    /// folder for Lantern (Linux: `~/.local/share/lantern/`), if the
+    /// platform has one.
+    pub fn path() -> Option<PathBuf> {
+        eframe::storage_dir("Lantern").map(|d| d.join(SESSION_FILE))
+    }
+
+    /// Reads a session file; `None` if it is missing, too large or not a
+    /// session (the previewer then starts from the defaults).
+    pub fn load(path: &Path) -> Option<Session> {
+        let text = crate::scene::read_text(path, 1 << 20, "session file").ok()?;
+        ron::from_str(&text).ok()
+    }
+
+    /// Writes the session whole or not at all (creating its folder): a
+    /// failed write keeps the previous session file.
+    pub fn save(&self, path: &Path) -> Result<(), String> {
+        let text = ron::ser::to_string_pretty(self, ron::ser::PrettyConfig::new())
+            .map_err(|e| format!("cannot write the session {}: {e}", path.display()))?;
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir)
+                .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        }
+        crate::atomic::write_bytes(path, text.as_bytes()).map_err(|e| e.to_string())
+    }
+}
+
 impl Default for Session {
     fn default() -> Self {
         Self {
@@ -371,8 +402,14 @@ impl LanternApp {
         let session: Session = if options.script.is_some() {
             Session::default()
         } else {
-            cc.storage
-                .and_then(|s| eframe::get_value(s, eframe::APP_KEY))
+            // Lantern's own session file first (written whole or not at
+            // all), else what an older build left in eframe's storage.
+            Session::path()
+                .and_then(|p| Session::load(&p))
+                .or_else(|| {
+                    cc.storage
+                        .and_then(|s| eframe::get_value(s, eframe::APP_KEY))
+                })
                 .unwrap_or_default()
         };
         let ctx = cc.egui_ctx.clone();
@@ -546,6 +583,9 @@ impl LanternApp {
         }
         files::push_recent(&mut self.session.recent, &loaded.path);
         self.notify(format!("opened {}", loaded.path.display()));
+        for warning in loaded.warnings {
+            self.notify_error(format!("warning: {warning}"));
+        }
     }
 
     /// Saves the document to `path`.
@@ -1057,9 +1097,13 @@ impl eframe::App for LanternApp {
         LanternApp::ui(self, ui);
     }
 
-    fn save(&mut self, storage: &mut dyn eframe::Storage) {
+    fn save(&mut self, _storage: &mut dyn eframe::Storage) {
         if self.script.is_none() {
-            eframe::set_value(storage, eframe::APP_KEY, &self.session);
+            if let Some(path) = Session::path() {
+                if let Err(e) = self.session.save(&path) {
+                    eprintln!("lantern: {e}");
+                }
+            }
         }
     }
 }

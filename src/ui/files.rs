@@ -5,7 +5,9 @@
 //!
 //! Loading runs on a background thread and is validated completely (the
 //! density is read too) before the current scene is replaced, so a bad file
-//! only produces a notification.
+//! only produces a notification. Saving and export write whole files or
+//! nothing ([`crate::atomic`]): a failure leaves the previous file and
+//! says so in a notification.
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -16,8 +18,10 @@ use glam::Vec3;
 
 use super::app::LanternApp;
 use super::backend::{Estimator, Snapshot};
-use crate::render::export::extension;
+use crate::atomic::write_atomically;
+use crate::render::export::{extension, write_png_bytes};
 use crate::render::tonemap::to_srgb8;
+use crate::render::Prepared;
 use crate::scene::{DensitySource, GridFormat, GridSource, Scene};
 
 /// Largest number of recent files remembered.
@@ -71,6 +75,9 @@ pub struct Loaded {
     pub is_scene_file: bool,
     /// The medium's world box.
     pub bounds: (Vec3, Vec3),
+    /// What makes the picture meaningless or the work very long
+    /// ([`crate::render::limits::warnings`]), shown as notifications.
+    pub warnings: Vec<String>,
 }
 
 /// Whether a dropped file is something the previewer opens.
@@ -109,12 +116,19 @@ pub fn load(path: &Path, current: &Scene) -> Result<Loaded, String> {
     let density = scene
         .load_density(&dir)
         .map_err(|e| format!("cannot open {}: {e:#}", path.display()))?;
+    let bounds = density.bounds();
+    let prepared = Prepared::with_density(scene.clone(), density);
+    let warnings = crate::render::limits::warnings(&prepared, &scene.render)
+        .into_iter()
+        .map(|w| format!("{}: {w}", path.display()))
+        .collect();
     Ok(Loaded {
         path: path.to_owned(),
         scene,
         scene_dir: dir,
         is_scene_file,
-        bounds: density.bounds(),
+        bounds,
+        warnings,
     })
 }
 
@@ -291,14 +305,14 @@ pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), 
         }
         Some("png") => {
             let bytes = to_srgb8(&stream.mean, app.session.exposure, app.session.view);
-            image::save_buffer(
+            write_png_bytes(
                 path,
                 &bytes,
                 stream.width,
                 stream.height,
-                image::ColorType::Rgb8,
+                image::ExtendedColorType::Rgb8,
             )
-            .map_err(|e| format!("cannot write {}: {e}", path.display()))
+            .map_err(|e| e.to_string())
         }
         _ => Err(format!(
             "{}: unsupported image format (use .exr or .png)",
@@ -374,10 +388,8 @@ pub fn write_exr_with_metadata(
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels.into()),
     );
-    Image::from_layer(layer)
-        .write()
-        .to_file(path)
-        .map_err(|e| fail(&e))
+    let image = Image::from_layer(layer);
+    write_atomically(path, |out| image.write().to_buffered(out)).map_err(|e| e.to_string())
 }
 
 /// Saves a screenshot of the window as PNG.
@@ -387,6 +399,12 @@ pub fn save_screenshot(path: &Path, image: &egui::ColorImage) -> Result<(), Stri
     for p in &image.pixels {
         bytes.extend_from_slice(&p.to_array());
     }
-    image::save_buffer(path, &bytes, w as u32, h as u32, image::ColorType::Rgba8)
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+    write_png_bytes(
+        path,
+        &bytes,
+        w as u32,
+        h as u32,
+        image::ExtendedColorType::Rgba8,
+    )
+    .map_err(|e| e.to_string())
 }

@@ -15,8 +15,7 @@
 //!
 //! The grid's world bounds are the file's bounding box.
 
-use std::fs::File;
-use std::io::{BufWriter, Read, Write};
+use std::io::{Read, Write};
 use std::path::Path;
 
 use glam::{UVec3, Vec3};
@@ -170,26 +169,26 @@ pub fn write_mitsuba_vol(path: &Path, grid: &VoxelGrid) -> Result<(), SceneError
             d.z
         )));
     }
-    let file = File::create(path).map_err(|e| write_err(e.to_string()))?;
-    let mut out = BufWriter::new(file);
-    let mut write = |bytes: &[u8]| out.write_all(bytes).map_err(|e| write_err(e.to_string()));
-    write(b"VOL")?;
-    write(&[VERSION])?;
-    for v in [ENCODING_F32, x, y, z, 1] {
-        write(&v.to_le_bytes())?;
-    }
-    for v in grid
-        .bounds_min
-        .to_array()
-        .into_iter()
-        .chain(grid.bounds_max.to_array())
-    {
-        write(&v.to_le_bytes())?;
-    }
-    for v in &grid.data {
-        write(&v.to_le_bytes())?;
-    }
-    out.flush().map_err(|e| write_err(e.to_string()))
+    crate::atomic::write_atomically(path, |out| -> std::io::Result<()> {
+        out.write_all(b"VOL")?;
+        out.write_all(&[VERSION])?;
+        for v in [ENCODING_F32, x, y, z, 1] {
+            out.write_all(&v.to_le_bytes())?;
+        }
+        for v in grid
+            .bounds_min
+            .to_array()
+            .into_iter()
+            .chain(grid.bounds_max.to_array())
+        {
+            out.write_all(&v.to_le_bytes())?;
+        }
+        for v in &grid.data {
+            out.write_all(&v.to_le_bytes())?;
+        }
+        Ok(())
+    })
+    .map_err(SceneError::from)
 }
 
 #[cfg(test)]

@@ -59,6 +59,13 @@ pub fn load_grid(
     format: GridFormat,
     grid_name: Option<&str>,
 ) -> Result<VoxelGrid, SceneError> {
+    if path.is_dir() {
+        return Err(SceneError::volume(
+            path,
+            "is a folder, not a volume file: name the .vdb, .vol or .ron (raw header) file \
+             inside it",
+        ));
+    }
     let format = resolve_format(path, format)?;
     if let (Some(name), false) = (grid_name, format == GridFormat::Vdb) {
         return Err(SceneError::volume(

@@ -242,10 +242,14 @@ pub fn write_raw(header_path: &Path, grid: &VoxelGrid) -> Result<(), SceneError>
     };
     let text = ron::ser::to_string_pretty(&header, ron::ser::PrettyConfig::new())
         .map_err(|e| write_err(header_path, e.to_string()))?;
-    let mut bytes: Vec<u8> = try_vec(grid.data.len() * 4).map_err(|r| write_err(&data_file, r))?;
-    bytes.extend(grid.data.iter().flat_map(|v| v.to_le_bytes()));
-    std::fs::write(&data_file, bytes).map_err(|e| write_err(&data_file, e.to_string()))?;
-    std::fs::write(header_path, text + "\n").map_err(|e| write_err(header_path, e.to_string()))
+    // Data first, then the header that names it: each whole or not at all.
+    crate::atomic::write_atomically(&data_file, |out| -> std::io::Result<()> {
+        for v in &grid.data {
+            std::io::Write::write_all(out, &v.to_le_bytes())?;
+        }
+        Ok(())
+    })?;
+    crate::atomic::write_bytes(header_path, (text + "\n").as_bytes()).map_err(SceneError::from)
 }
 
 #[cfg(test)]
