@@ -144,7 +144,7 @@ impl Quality {
             l1: L1Kind::Field,
             window_scatters: 2,
             view_walks: 16,
-            light_samples: 8,
+            light_samples: 4,
             view_share: 0.9,
             resample_every: 2,
         };
@@ -154,7 +154,7 @@ impl Quality {
                 lights: 2048,
                 walks: 8,
                 view_walks: 8,
-                light_samples: 4,
+                light_samples: 2,
                 resample_every: 4,
                 ..final_
             },
