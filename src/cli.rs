@@ -421,6 +421,10 @@ pub enum Command {
     /// of each part of the gather with one light set and across light sets,
     /// and the distribution of single walks.
     Noise(crate::noise::NoiseArgs),
+    /// The internal lights against the reference at equal wall time on
+    /// scenes with a converged reference (mean error per channel, 8×8-block
+    /// and per-pixel RMSE); writes report.md and report.csv.
+    EqualTime(crate::equal_time::EqualTimeArgs),
 }
 
 /// Runs the command line; the binary's `main` calls this.
@@ -479,6 +483,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Some(Command::Validate(args)) => crate::validate::run(&args),
         Some(Command::Converge(args)) => crate::converge::run(&args),
         Some(Command::Noise(args)) => crate::noise::run(&args),
+        Some(Command::EqualTime(args)) => crate::equal_time::run(&args),
     }
 }
 
