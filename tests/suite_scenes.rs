@@ -237,3 +237,45 @@ fn point_light_is_in_a_gap_of_the_medium() {
     });
     assert!(near, "no medium within 0.5 of the light");
 }
+
+/// The Mitsuba 3 cross-check's copies of two suite scenes
+/// (`tests/data/mitsuba/suite_*.ron`, written by
+/// `tests/mitsuba/make_references.py` at 48²) are those scenes but for the
+/// image size: camera, optics, lights and the density grid itself.
+#[test]
+fn mitsuba_copies_are_the_suite_scenes() {
+    use lantern::scene::Density;
+    for (suite, copy) in [
+        ("chromatic", "suite_chromatic"),
+        ("point_lit", "suite_point_lit"),
+    ] {
+        let a = common::prepare_with(&format!("assets/scenes/suite/{suite}.ron"), |_| {});
+        let b = common::prepare_with(&format!("tests/data/mitsuba/{copy}.ron"), |_| {});
+        let (ca, cb) = (&a.scene.camera, &b.scene.camera);
+        assert_eq!(
+            (ca.eye, ca.target, ca.up, ca.fov_y_deg),
+            (cb.eye, cb.target, cb.up, cb.fov_y_deg),
+            "{suite}"
+        );
+        assert_eq!(a.volume.optics, b.volume.optics, "{suite}");
+        assert_eq!(a.volume.bounds, b.volume.bounds, "{suite}");
+        let close = |x: Vec3, y: Vec3| (x - y).abs().max_element() < 1e-6;
+        let (la, lb) = (&a.lights, &b.lights);
+        assert_eq!(
+            (la.suns.len(), la.points.len()),
+            (lb.suns.len(), lb.points.len())
+        );
+        for (x, y) in la.suns.iter().zip(&lb.suns) {
+            assert!(close(x.direction, y.direction) && close(x.irradiance, y.irradiance));
+        }
+        for (x, y) in la.points.iter().zip(&lb.points) {
+            assert!(close(x.position, y.position) && close(x.intensity, y.intensity));
+        }
+        match (&a.volume.density, &b.volume.density) {
+            (Density::Grid(x), Density::Grid(y)) => {
+                assert_eq!((x.dims, &x.data), (y.dims, &y.data), "{suite}")
+            }
+            _ => panic!("{suite}: both should be grids"),
+        }
+    }
+}
