@@ -247,8 +247,8 @@ SCENES = [
 
 # Two scenes of the suite (assets/scenes/suite/chromatic.ron and point_lit.ron),
 # the same but for the image size: the Gaussian puffs (the grid above, which is
-# assets/volumes/puffs.vol) with a chromatic sigma_t, and with a point light in
-# a gap of the medium under the puffs.
+# assets/volumes/puffs.vol) with a chromatic sigma_t, and with a point light
+# just below the medium's box, under the puffs.
 SCENES += [
     dict(
         name="suite_chromatic",
@@ -270,7 +270,7 @@ SCENES += [
         sigma_t=(6.0, 6.0, 6.0),
         albedo=(0.95, 0.95, 0.95),
         g=0.3,
-        lights=[dict(kind="point", position=(-0.55, -0.75, 0.45), intensity=(3.0, 2.4, 1.6))],
+        lights=[dict(kind="point", position=(-0.55, -0.95, 0.45), intensity=(5.0, 4.0, 2.7))],
     ),
 ]
 
@@ -285,9 +285,9 @@ NOTES = {
                  "tolerance could be met reliably. Outside, r >= 0.45 bounds the variance.",
     "suite_chromatic": "assets/scenes/suite/chromatic.ron at 48x48; chromatic sigma_t: three grey "
                        "renders as for chromatic_sphere.",
-    "suite_point_lit": "assets/scenes/suite/point_lit.ron at 48x48: the point light sits in a gap of "
-                       "the grid (density 0.009 there, extinction 0.055 per unit), which keeps "
-                       "next-event estimation near it rare.",
+    "suite_point_lit": "assets/scenes/suite/point_lit.ron at 48x48: the point light sits 0.05 below "
+                       "the grid's box (density 0 there; the puffs within 0.5), which bounds the "
+                       "variance of next-event estimation to it (see box_point).",
 }
 
 LANTERN_SPP = 256  # the `render.spp` written into the .ron (the test may override it)
