@@ -18,7 +18,7 @@ use crate::cpu::Renderer;
 use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuRenderer};
 use crate::physics::internal::BuildTimings;
-use crate::render::export::write_image;
+use crate::render::export::{write_exr_with_metadata, write_image};
 use crate::render::film::image_mean;
 use crate::render::tonemap::ViewTransform;
 use crate::render::{
@@ -245,6 +245,119 @@ impl InternalArgs {
     }
 }
 
+/// `lantern render`'s time limit and variance output.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct TimedArgs {
+    /// Render passes until this many seconds are spent (the internal
+    /// lights' build included), at least one; `--spp` is then an upper
+    /// bound (without it the scene's spp is ignored). The spp reached and
+    /// the seconds are printed and stored in the EXR header.
+    #[arg(long, value_name = "SECONDS")]
+    pub time: Option<f64>,
+    /// Also write the variance of each pixel's mean (sample variance /
+    /// spp) to this EXR, as `converge --converged` and `equal-time` read
+    /// it next to a converged image (`NAME_var.exr` beside `NAME.exr`).
+    #[arg(long, value_name = "FILE.exr")]
+    pub variance: Option<PathBuf>,
+}
+
+/// When a progressive render stops: after `max_spp` passes, or once
+/// `seconds` are spent, whichever comes first; the first pass is always
+/// rendered, and a pass once begun is finished (a render overshoots its
+/// time by at most one pass).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StopRule {
+    /// At most this many passes (`None`: only the time limits).
+    pub max_spp: Option<u32>,
+    /// Seconds after which no pass is begun (`None`: only `max_spp`).
+    pub seconds: Option<f64>,
+}
+
+impl StopRule {
+    /// Whether to begin another pass after `passes` passes and `elapsed`
+    /// seconds.
+    pub fn another(&self, passes: u32, elapsed: f64) -> bool {
+        if passes == 0 {
+            return true;
+        }
+        if passes >= self.max_spp.unwrap_or(u32::MAX) {
+            return false;
+        }
+        self.seconds.is_none_or(|s| elapsed < s)
+    }
+}
+
+/// What `lantern render` stores in an EXR header (`lantern/…` text
+/// attributes, read back by [`crate::render::export::read_exr_metadata`]):
+/// the spp reached, the seconds spent (the internal lights' build
+/// included), the method, the seed, the backend, the time limit if any,
+/// and for the internal-lights method its settings (RON) and resolved `s*`.
+pub fn render_metadata(
+    settings: &RenderSettings,
+    spp: u32,
+    seconds: f64,
+    backend: BackendArg,
+    time_limit: Option<f64>,
+    s_star: Option<f32>,
+) -> Vec<(String, String)> {
+    let mut meta = vec![
+        ("lantern/spp".to_owned(), spp.to_string()),
+        ("lantern/seconds".to_owned(), format!("{seconds:.4}")),
+        (
+            "lantern/method".to_owned(),
+            match settings.method {
+                Method::Reference => "reference",
+                Method::Internal => "internal",
+            }
+            .to_owned(),
+        ),
+        ("lantern/seed".to_owned(), settings.seed.to_string()),
+        (
+            "lantern/backend".to_owned(),
+            format!("{backend:?}").to_lowercase(),
+        ),
+    ];
+    if let Some(t) = time_limit {
+        meta.push(("lantern/time_limit".to_owned(), t.to_string()));
+    }
+    if settings.method == Method::Internal {
+        if let Ok(ron) = ron::to_string(&settings.internal) {
+            meta.push(("lantern/internal".to_owned(), ron));
+        }
+        if let Some(s) = s_star {
+            meta.push(("lantern/s_star".to_owned(), s.to_string()));
+        }
+    }
+    meta
+}
+
+/// Writes a render's image (EXR with `meta` in its header, or PNG) and,
+/// if asked, the variance of its pixel means (EXR).
+fn write_render(
+    out: &Path,
+    film: &Film,
+    exposure: f32,
+    view: ViewTransform,
+    meta: &[(String, String)],
+    variance: Option<&Path>,
+) -> Result<()> {
+    let (w, h) = (film.width, film.height);
+    if crate::render::export::extension(out).as_deref() == Some("exr") {
+        write_exr_with_metadata(out, w, h, &film.mean(), meta)?;
+    } else {
+        write_image(out, w, h, &film.mean(), exposure, view)?;
+    }
+    if let Some(path) = variance {
+        let mut meta = meta.to_vec();
+        meta.push((
+            "lantern/content".to_owned(),
+            "variance of the pixel mean".to_owned(),
+        ));
+        write_exr_with_metadata(path, w, h, &film.variance_of_mean(), &meta)?;
+    }
+    Ok(())
+}
+
 impl From<MethodArg> for Method {
     fn from(m: MethodArg) -> Self {
         match m {
@@ -296,6 +409,9 @@ pub enum Command {
         /// Internal-lights parameters.
         #[command(flatten)]
         internal: InternalArgs,
+        /// Time limit and variance output.
+        #[command(flatten)]
+        timed: TimedArgs,
     },
     /// Measure the renderer's speed (samples per second) on scenes.
     Bench {
@@ -337,6 +453,10 @@ pub enum Command {
     /// of each part of the gather with one light set and across light sets,
     /// and the distribution of single walks.
     Noise(crate::noise::NoiseArgs),
+    /// The internal lights against the reference at equal wall time on
+    /// scenes with a converged reference (mean error per channel, 8×8-block
+    /// and per-pixel RMSE); writes report.md and report.csv.
+    EqualTime(crate::equal_time::EqualTimeArgs),
 }
 
 /// Runs the command line; the binary's `main` calls this.
@@ -355,6 +475,7 @@ pub fn run(cli: Cli) -> Result<()> {
             exposure,
             view,
             internal,
+            timed,
         }) => {
             set_threads(threads)?;
             render_command(
@@ -367,6 +488,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 exposure,
                 view,
                 &internal,
+                &timed,
             )
         }
         Some(Command::Bench {
@@ -393,6 +515,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Some(Command::Validate(args)) => crate::validate::run(&args),
         Some(Command::Converge(args)) => crate::converge::run(&args),
         Some(Command::Noise(args)) => crate::noise::run(&args),
+        Some(Command::EqualTime(args)) => crate::equal_time::run(&args),
     }
 }
 
@@ -441,6 +564,7 @@ fn render_command(
     exposure: f32,
     view: ViewTransform,
     internal: &InternalArgs,
+    timed: &TimedArgs,
 ) -> Result<()> {
     match crate::render::export::extension(out).as_deref() {
         Some("exr") | Some("png") => {}
@@ -454,6 +578,16 @@ fn render_command(
     }
     // Before any work: the output can be written, and the image fits.
     crate::atomic::check_writable(out)?;
+    if let Some(t) = timed.time {
+        if !(t.is_finite() && t > 0.0) {
+            bail!("--time must be a positive number of seconds");
+        }
+    }
+    if let Some(v) = &timed.variance {
+        if crate::render::export::extension(v).as_deref() != Some("exr") {
+            bail!("{}: --variance must end in .exr", v.display());
+        }
+    }
     let t_load = Instant::now();
     let scene = Scene::load(scene_path)?;
     crate::render::limits::check_image_memory(
@@ -485,12 +619,12 @@ fn render_command(
         eprintln!("warning: {warning}");
     }
     if backend == BackendArg::Gpu {
+        let rule = stop_rule(spp, settings.spp, timed);
         return render_gpu(
-            scene_path, &prepared, &settings, load_secs, out, exposure, view,
+            scene_path, &prepared, &settings, load_secs, out, exposure, view, rule, timed,
         );
     }
     let method = settings.method;
-    let spp = settings.spp;
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let t_build = Instant::now();
     let never = AtomicBool::new(false);
@@ -511,30 +645,28 @@ fn render_command(
         );
     }
 
-    let bar = ProgressBar::new(spp as u64);
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} spp ({eta})",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let rule = stop_rule(spp, settings.spp, timed);
+    let bar = pass_bar(rule);
     let start = Instant::now();
     let mut film = Film::new(w, h);
     let mut single = Film::new(w, h);
-    for pass in 0..spp {
+    let mut pass = 0;
+    while rule.another(pass, t_build.elapsed().as_secs_f64()) {
         let img = renderer
             .pass(pass, &never)
             .context("render was cancelled")?;
         film.add_pass(&img.total);
         single.add_pass(&img.single);
-        if pass == 0 {
-            warn_long_render(start.elapsed().as_secs_f64(), spp);
+        if let (0, Some(n)) = (pass, rule.max_spp) {
+            warn_long_render(start.elapsed().as_secs_f64(), n);
         }
         bar.inc(1);
+        pass += 1;
     }
+    let spent = t_build.elapsed().as_secs_f64();
     bar.finish_and_clear();
     check_flights()?;
-    let sets = spp
+    let sets = pass
         .checked_sub(1)
         .map_or(0, |last| light_set(&settings, last));
     if method == Method::Internal && sets > 0 {
@@ -545,7 +677,17 @@ fn render_command(
     }
     let secs = start.elapsed().as_secs_f64();
     let samples = w as f64 * h as f64 * film.samples as f64;
-    write_image(out, w, h, &film.mean(), exposure, view)?;
+    let s_star = renderer.internal_lights().map(|l| l.s_star);
+    let meta = render_metadata(
+        &settings,
+        film.samples,
+        spent,
+        BackendArg::Cpu,
+        timed.time,
+        s_star,
+    );
+    write_render(out, &film, exposure, view, &meta, timed.variance.as_deref())?;
+    print_time_limit(timed, film.samples, spent);
     let mean = film.image_mean();
     println!(
         "rendered {} ({w}×{h}, {} spp, {:?}) in {:.2} s (+{:.2} s loading, {:.2} s re-sampling): {:.3} M samples/s; image mean RGB {:.5} {:.5} {:.5}; wrote {}",
@@ -616,16 +758,45 @@ fn print_parts(mean: glam::Vec3, single: glam::Vec3, method: Method) {
     );
 }
 
-/// A spinner-less progress bar over `spp` passes.
-fn pass_bar(spp: u32) -> ProgressBar {
-    let bar = ProgressBar::new(spp as u64);
-    bar.set_style(
-        ProgressStyle::with_template(
+/// A progress bar over the passes of `rule`: a bar to its spp, or a
+/// count of passes when only its time limits.
+fn pass_bar(rule: StopRule) -> ProgressBar {
+    let (bar, template) = match (rule.seconds, rule.max_spp) {
+        (None, Some(spp)) => (
+            ProgressBar::new(spp as u64),
             "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} spp ({eta})",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+        ),
+        _ => (
+            ProgressBar::no_length(),
+            "{spinner} [{elapsed_precise}] {pos} spp",
+        ),
+    };
+    bar.set_style(
+        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     bar
+}
+
+/// The stop rule of `lantern render`: `settings_spp` passes, or with
+/// `--time` passes until the time is spent, at most `--spp` if given.
+fn stop_rule(spp_arg: Option<u32>, settings_spp: u32, timed: &TimedArgs) -> StopRule {
+    match timed.time {
+        Some(t) => StopRule {
+            max_spp: spp_arg,
+            seconds: Some(t),
+        },
+        None => StopRule {
+            max_spp: Some(settings_spp),
+            seconds: None,
+        },
+    }
+}
+
+/// With `--time`: the spp reached and the seconds spent.
+fn print_time_limit(timed: &TimedArgs, spp: u32, spent: f64) {
+    if let Some(t) = timed.time {
+        println!("--time {t}: {spp} spp in {spent:.3} s (the internal lights' build included)");
+    }
 }
 
 /// The GPU device for `--backend gpu`, with a notice of what it is.
@@ -645,6 +816,7 @@ fn gpu_context() -> Result<GpuContext> {
 
 /// `render --backend gpu`: the reference method on the GPU, accumulated
 /// there and read back once for the image file.
+#[allow(clippy::too_many_arguments)] // render_command's options
 fn render_gpu(
     scene_path: &Path,
     prepared: &Prepared,
@@ -653,6 +825,8 @@ fn render_gpu(
     out: &Path,
     exposure: f32,
     view: ViewTransform,
+    rule: StopRule,
+    timed: &TimedArgs,
 ) -> Result<()> {
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let ctx = gpu_context()?;
@@ -660,11 +834,12 @@ fn render_gpu(
     let (mut renderer, _) = gpu_renderer(&ctx, prepared, settings)?;
     renderer.finish()?;
     let build_secs = t_build.elapsed().as_secs_f64();
-    let bar = pass_bar(settings.spp);
+    let bar = pass_bar(rule);
     let start = Instant::now();
     let mut sets = 0;
     let mut resample_secs = 0.0;
-    for pass in 0..settings.spp {
+    let mut pass = 0;
+    while rule.another(pass, t_build.elapsed().as_secs_f64()) {
         let renew =
             light_set_starting(settings, pass).filter(|_| settings.method == Method::Internal);
         if let Some(set) = renew {
@@ -680,11 +855,13 @@ fn render_gpu(
         // Waiting after each pass keeps the progress bar honest and the
         // queue short; the accumulation itself stays on the GPU.
         renderer.finish()?;
-        if pass == 0 {
-            warn_long_render(start.elapsed().as_secs_f64(), settings.spp);
+        if let (0, Some(n)) = (pass, rule.max_spp) {
+            warn_long_render(start.elapsed().as_secs_f64(), n);
         }
         bar.inc(1);
+        pass += 1;
     }
+    let spent = t_build.elapsed().as_secs_f64();
     bar.finish_and_clear();
     if sets > 0 {
         println!(
@@ -695,7 +872,18 @@ fn render_gpu(
     let secs = start.elapsed().as_secs_f64();
     let image = renderer.read_back()?;
     let film = image.film();
-    write_image(out, w, h, &film.mean(), exposure, view)?;
+    let s_star =
+        (settings.method == Method::Internal).then(|| internal_params(prepared, settings).s_star);
+    let meta = render_metadata(
+        settings,
+        film.samples,
+        spent,
+        BackendArg::Gpu,
+        timed.time,
+        s_star,
+    );
+    write_render(out, &film, exposure, view, &meta, timed.variance.as_deref())?;
+    print_time_limit(timed, film.samples, spent);
     let mean = film.image_mean();
     let single = image_mean(&image.single_mean());
     let samples = w as f64 * h as f64 * film.samples as f64;
@@ -918,4 +1106,93 @@ fn print_bench_row(
             .map(|t| format!(" {t:>16.3}"))
             .unwrap_or_default()
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::export::{read_exr, read_exr_metadata};
+
+    /// The first pass always; then the spp bound, the time, or both.
+    #[test]
+    fn stop_rule_bounds_passes_and_time() {
+        let spp = StopRule {
+            max_spp: Some(3),
+            seconds: None,
+        };
+        assert!(spp.another(0, 1e9) && spp.another(2, 1e9) && !spp.another(3, 0.0));
+        let time = StopRule {
+            max_spp: None,
+            seconds: Some(2.0),
+        };
+        assert!(time.another(0, 5.0), "at least one pass");
+        assert!(time.another(1000, 1.99) && !time.another(1, 2.0));
+        let both = StopRule {
+            max_spp: Some(10),
+            seconds: Some(2.0),
+        };
+        assert!(!both.another(10, 0.5) && !both.another(4, 2.5) && both.another(4, 0.5));
+    }
+
+    fn meta_value<'a>(meta: &'a [(String, String)], key: &str) -> &'a str {
+        meta.iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+            .unwrap_or_else(|| panic!("{key} missing from {meta:?}"))
+    }
+
+    /// `render --time`: passes until the time is spent, the spp and the
+    /// seconds in the EXR header with the method and seed, and the variance
+    /// file beside it; `--spp` bounds the passes under a long time.
+    #[test]
+    fn render_time_stores_spp_and_seconds() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/scenes/thin_sphere.ron");
+        let out = dir.path().join("timed.exr");
+        let var = dir.path().join("timed_var.exr");
+        let args = |extra: &[&str]| {
+            let mut v: Vec<String> = ["lantern", "render", scene.to_str().unwrap(), "--out"]
+                .iter()
+                .map(|s| s.to_string())
+                .collect();
+            v.push(out.to_string_lossy().into_owned());
+            v.extend(extra.iter().map(|s| s.to_string()));
+            Cli::parse_from(v)
+        };
+        run(args(&[
+            "--time",
+            "0.4",
+            "--seed",
+            "5",
+            "--variance",
+            var.to_str().unwrap(),
+        ]))
+        .unwrap();
+        let meta = read_exr_metadata(&out).unwrap();
+        let spp: u32 = meta_value(&meta, "lantern/spp").parse().unwrap();
+        let secs: f64 = meta_value(&meta, "lantern/seconds").parse().unwrap();
+        assert!(spp > 1 && secs >= 0.4, "{meta:?}");
+        assert_eq!(meta_value(&meta, "lantern/method"), "reference");
+        assert_eq!(meta_value(&meta, "lantern/seed"), "5");
+        assert_eq!(meta_value(&meta, "lantern/time_limit"), "0.4");
+        let (image, variance) = (read_exr(&out).unwrap(), read_exr(&var).unwrap());
+        assert_eq!(
+            (variance.width, variance.height),
+            (image.width, image.height)
+        );
+        assert!(variance.pixels.iter().any(|v| v.x > 0.0));
+
+        run(args(&[
+            "--time", "100", "--spp", "3", "--method", "internal", "--lights", "256", "--walks",
+            "4",
+        ]))
+        .unwrap();
+        let meta = read_exr_metadata(&out).unwrap();
+        assert_eq!(meta_value(&meta, "lantern/spp"), "3");
+        assert_eq!(meta_value(&meta, "lantern/method"), "internal");
+        let internal: InternalSettings =
+            ron::from_str(meta_value(&meta, "lantern/internal")).unwrap();
+        assert_eq!((internal.lights, internal.walks), (256, 4));
+        assert!(meta_value(&meta, "lantern/s_star").parse::<f32>().unwrap() > 0.0);
+    }
 }

@@ -30,6 +30,7 @@ pub mod atomic;
 pub mod cli;
 pub mod converge;
 pub mod cpu;
+pub mod equal_time;
 pub mod gpu;
 pub mod noise;
 pub mod physics;

@@ -65,3 +65,16 @@ fn grid_cloud_matches_mitsuba() {
 fn box_point_matches_mitsuba() {
     crosscheck("box_point");
 }
+
+/// The suite's chromatic puffs (`assets/scenes/suite/chromatic.ron`) at 48².
+#[test]
+fn suite_chromatic_matches_mitsuba() {
+    crosscheck("suite_chromatic");
+}
+
+/// The suite's point light under smoke (`assets/scenes/suite/point_lit.ron`)
+/// at 48².
+#[test]
+fn suite_point_lit_matches_mitsuba() {
+    crosscheck("suite_point_lit");
+}

@@ -26,7 +26,9 @@ aborts if one fails.
 Usage (from the repository root)::
 
     pip install mitsuba==3.9.1 numpy
-    python3 tests/mitsuba/make_references.py            # full run (~7.5 min on 2 idle cores)
+    python3 tests/mitsuba/make_references.py            # full run (~7.5 min on 2 idle cores, and
+                                                        # ~31 min more for the two suite_* scenes
+                                                        # on the shared, loaded 2-core machine)
     python3 tests/mitsuba/make_references.py --quick    # low spp smoke run, writes to
                                                         # a temp dir unless --out is given
     python3 tests/mitsuba/make_references.py --checks-only   # only the sanity checks
@@ -107,6 +109,9 @@ SPP_FULL = {  # per run
     "chromatic_sphere": 2048, # per channel (3 grey renders), ~4.1 ms/spp -> ~135 s
     "grid_cloud": 2048,       # ~3.2 ms/spp -> ~105 s
     "box_point": 8192,        # ~0.8 ms/spp -> ~105 s (heavy-tailed, see NOTES)
+    # Two scenes of Lantern's suite (assets/scenes/suite/, issue 21) at 48x48:
+    "suite_chromatic": 2048,  # per channel (3 grey renders)
+    "suite_point_lit": 4096,
 }
 SPP_QUICK = 32
 RUNS_QUICK = 4
@@ -240,6 +245,35 @@ SCENES = [
     ),
 ]
 
+# Two scenes of the suite (assets/scenes/suite/chromatic.ron and point_lit.ron),
+# the same but for the image size: the Gaussian puffs (the grid above, which is
+# assets/volumes/puffs.vol) with a chromatic sigma_t, and with a point light
+# just below the medium's box, under the puffs.
+SCENES += [
+    dict(
+        name="suite_chromatic",
+        camera=dict(eye=(0.8, 0.55, 3.4), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
+                    fov_y_deg=40.0, width=48, height=48),
+        density=dict(kind="grid", file="grid_cloud.vol", bounds=GRID_BOUNDS),
+        density_scale=1.0,
+        sigma_t=(3.0, 5.0, 8.0),
+        albedo=(0.95, 0.95, 0.95),
+        g=0.5,
+        lights=[dict(kind="sun", direction=normalize((0.7, -0.6, -0.4)), irradiance=(5.0, 5.0, 5.0))],
+    ),
+    dict(
+        name="suite_point_lit",
+        camera=dict(eye=(0.8, 0.55, 3.4), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
+                    fov_y_deg=40.0, width=48, height=48),
+        density=dict(kind="grid", file="grid_cloud.vol", bounds=GRID_BOUNDS),
+        density_scale=1.0,
+        sigma_t=(6.0, 6.0, 6.0),
+        albedo=(0.95, 0.95, 0.95),
+        g=0.3,
+        lights=[dict(kind="point", position=(-0.55, -0.95, 0.45), intensity=(5.0, 4.0, 2.7))],
+    ),
+]
+
 NOTES = {
     "chromatic_sphere": "sigma_t is chromatic: rendered as three grey scenes (one per RGB channel; "
                         "spp_per_run is per channel) because Mitsuba's single-channel distance sampling "
@@ -249,6 +283,11 @@ NOTES = {
                  "mean, infinite variance): with the light inside, the per-run image means of both "
                  "renderers scattered by several per cent with rare large outliers, so no fixed 2 % "
                  "tolerance could be met reliably. Outside, r >= 0.45 bounds the variance.",
+    "suite_chromatic": "assets/scenes/suite/chromatic.ron at 48x48; chromatic sigma_t: three grey "
+                       "renders as for chromatic_sphere.",
+    "suite_point_lit": "assets/scenes/suite/point_lit.ron at 48x48: the point light sits 0.05 below "
+                       "the grid's box (density 0 there; the puffs within 0.5), which bounds the "
+                       "variance of next-event estimation to it (see box_point).",
 }
 
 LANTERN_SPP = 256  # the `render.spp` written into the .ron (the test may override it)

@@ -1,0 +1,518 @@
+//! `lantern equal-time`: the internal lights against the reference at equal
+//! wall time, on scenes with a converged reference (issue 21: the suite of
+//! `assets/scenes/suite/` and its references in `tests/data/suite/`, made
+//! by `tests/suite/make_references.sh`).
+//!
+//! For each scene both renderers (CPU) render progressively with seeds
+//! other than the converged image's; the clock starts before the renderer
+//! is built (the internal lights' placement and walks are paid for) and is
+//! paused while the image is measured. At each time `T` of `--times`, at
+//! the end of the first pass at or past `T` (so at most one pass more), the
+//! image is compared with the converged one:
+//!
+//! - the error of the image mean per channel, `mean(a)/mean(c) − 1`, signed
+//!   (the converged mean's own standard error, printed above each table,
+//!   is not removed: a signed error has nothing to subtract);
+//! - the RMSE of the 8×8 block means ([`block_rmse_against`]) and
+//! - the per-pixel RMSE ([`rmse_against`]), both relative to the converged
+//!   image's mean, with the converged image's noise removed from their
+//!   mean squared errors: `E[(a − c)²] = E[(a − μ)²] + Var[c]` for a
+//!   converged image `c` independent of the render, so the mean of its
+//!   per-pixel variance of the mean (`NAME_var.exr`), or of its block
+//!   means' variance `Σ Var / 64²`, is subtracted (clamped at 0).
+//!
+//! Output: a Markdown table per scene on stdout, and `report.md` and
+//! `report.csv` in `--out`.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use glam::Vec3;
+
+use crate::cli::InternalArgs;
+use crate::converge::{block_rmse_against, rmse_against, variance_path, BLOCK};
+use crate::cpu::Renderer;
+use crate::render::export::{read_exr, read_exr_metadata, RgbImage};
+use crate::render::film::image_mean;
+use crate::render::{Film, Prepared};
+use crate::scene::{Method, RenderSettings};
+use crate::validate::{compare, load_square};
+
+/// Options of `lantern equal-time`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct EqualTimeArgs {
+    /// Scene files (.ron); each needs `NAME.exr` and `NAME_var.exr` in
+    /// `--converged-dir`, NAME being the scene file's stem.
+    #[arg(required = true)]
+    pub scenes: Vec<PathBuf>,
+    /// Folder of the converged references.
+    #[arg(long, default_value = "tests/data/suite")]
+    pub converged_dir: PathBuf,
+    /// Wall times in seconds at which both renders are measured.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8")]
+    pub times: Vec<f64>,
+    /// Image side in pixels (overrides the scene's camera; 0 keeps it);
+    /// must match the converged references.
+    #[arg(long, default_value_t = 0)]
+    pub size: u32,
+    /// Worker threads for the renders (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Seed of the internal-lights render (the reference renders with
+    /// seed + 1); both must differ from the converged image's.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output folder for report.md and report.csv.
+    #[arg(long, default_value = "target/equal-time")]
+    pub out: PathBuf,
+    /// Internal-lights parameters (default: the scene's).
+    #[command(flatten)]
+    pub internal: InternalArgs,
+}
+
+/// The three errors of an image against a converged one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Errors {
+    /// Relative error of the image mean per channel, signed.
+    pub mean: Vec3,
+    /// RMSE of the 8×8 block means relative to the converged mean, the
+    /// converged image's noise removed.
+    pub block: f32,
+    /// Per-pixel RMSE relative to the converged mean, the converged
+    /// image's noise removed.
+    pub pixel: f32,
+}
+
+/// [`Errors`] of `image` against `converged` (`width` × `height`, row-major)
+/// whose per-pixel variance of the mean is `converged_var`.
+pub fn errors(
+    image: &[Vec3],
+    converged: &[Vec3],
+    converged_var: &[Vec3],
+    width: usize,
+    height: usize,
+) -> Errors {
+    Errors {
+        mean: compare(image, converged).0,
+        block: block_rmse_against(image, converged, converged_var, width, height),
+        pixel: rmse_against(image, converged, converged_var),
+    }
+}
+
+/// One measurement: a method at one time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Snapshot {
+    /// The time asked for.
+    pub target: f64,
+    /// Seconds actually spent (at least `target`, at most one pass more).
+    pub secs: f64,
+    /// Samples per pixel by then.
+    pub spp: u32,
+    /// The errors then.
+    pub errors: Errors,
+}
+
+/// Renders progressively with `settings` and measures the image at each of
+/// `times` (ascending), as the module says.
+fn snapshots(
+    prepared: &Arc<Prepared>,
+    settings: &RenderSettings,
+    times: &[f64],
+    converged: &[Vec3],
+    converged_var: &[Vec3],
+    label: &str,
+) -> Result<Vec<Snapshot>> {
+    let never = AtomicBool::new(false);
+    let start = Instant::now();
+    let renderer =
+        Renderer::new(prepared.clone(), settings, &never).context("render was cancelled")?;
+    let mut elapsed = start.elapsed();
+    let cam = prepared.camera;
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let mut film = Film::new(cam.width, cam.height);
+    let mut out = Vec::new();
+    let mut pass = 0;
+    for &target in times {
+        let due = Duration::from_secs_f64(target);
+        while pass == 0 || elapsed < due {
+            let start = Instant::now();
+            let img = renderer
+                .pass(pass, &never)
+                .context("render was cancelled")?;
+            film.add_pass(&img.total);
+            elapsed += start.elapsed();
+            pass += 1;
+        }
+        let errors = errors(&film.mean(), converged, converged_var, w, h);
+        eprintln!(
+            "{label}: {target} s: {pass} spp in {:.2} s, pixel RMSE {:.2} %",
+            elapsed.as_secs_f64(),
+            100.0 * errors.pixel
+        );
+        out.push(Snapshot {
+            target,
+            secs: elapsed.as_secs_f64(),
+            spp: pass,
+            errors,
+        });
+    }
+    Ok(out)
+}
+
+/// A converged reference and what its header says about it.
+struct Converged {
+    image: RgbImage,
+    var: Vec<Vec3>,
+    spp: Option<String>,
+    seed: Option<u64>,
+}
+
+fn read_converged(dir: &Path, stem: &str, w: u32, h: u32) -> Result<Converged> {
+    let path = dir.join(format!("{stem}.exr"));
+    let var_path = variance_path(&path);
+    let read = |p: &Path| read_exr(p).with_context(|| format!("cannot read {}", p.display()));
+    let (image, var) = (read(&path)?, read(&var_path)?);
+    for img in [&image, &var] {
+        if (img.width, img.height) != (w, h) {
+            bail!(
+                "{} or {} is {}×{}, but the render is {w}×{h} (--size)",
+                path.display(),
+                var_path.display(),
+                img.width,
+                img.height
+            );
+        }
+    }
+    let meta = read_exr_metadata(&path).unwrap_or_default();
+    let value = |key: &str| meta.iter().find(|(k, _)| k == key).map(|(_, v)| v.clone());
+    Ok(Converged {
+        spp: value("lantern/spp"),
+        seed: value("lantern/seed").and_then(|s| s.parse().ok()),
+        image,
+        var: var.pixels,
+    })
+}
+
+/// The converged image's own noise: the median over its brighter pixels
+/// (above 5 % of the 99th percentile of their channel mean) of the
+/// relative standard error of a pixel, and of an 8×8 block mean; and the
+/// relative standard error of its image mean per channel.
+fn own_noise(c: &Converged) -> (f64, f64, Vec3) {
+    let (w, h) = (c.image.width as usize, c.image.height as usize);
+    let median_rel = |values: Vec<(f64, f64)>| {
+        let mut bright: Vec<f64> = values.iter().map(|v| v.0).collect();
+        bright.sort_by(f64::total_cmp);
+        let p99 = bright
+            .get((bright.len() * 99 / 100).min(bright.len().saturating_sub(1)))
+            .copied()
+            .unwrap_or(0.0);
+        let mut rel: Vec<f64> = values
+            .iter()
+            .filter(|(m, _)| *m > 0.05 * p99 && *m > 0.0)
+            .map(|(m, v)| v.sqrt() / m)
+            .collect();
+        rel.sort_by(f64::total_cmp);
+        rel.get(rel.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    let pixel = median_rel(
+        c.image
+            .pixels
+            .iter()
+            .zip(&c.var)
+            .map(|(m, v)| (m.element_sum() as f64 / 3.0, v.element_sum() as f64 / 3.0))
+            .collect(),
+    );
+    let mut blocks = Vec::new();
+    for by in 0..h / BLOCK {
+        for bx in 0..w / BLOCK {
+            let (mut m, mut v) = (0.0f64, 0.0f64);
+            for y in by * BLOCK..(by + 1) * BLOCK {
+                for x in bx * BLOCK..(bx + 1) * BLOCK {
+                    m += c.image.pixels[y * w + x].element_sum() as f64 / 3.0;
+                    v += c.var[y * w + x].element_sum() as f64 / 3.0;
+                }
+            }
+            let n = (BLOCK * BLOCK) as f64;
+            blocks.push((m / n, v / (n * n)));
+        }
+    }
+    let block = median_rel(blocks);
+    let n = c.image.pixels.len().max(1) as f32;
+    let mean = image_mean(&c.image.pixels).max(Vec3::splat(1e-30));
+    let se = (image_mean(&c.var) / n).powf(0.5) / mean;
+    (pixel, block, se)
+}
+
+/// Runs `lantern equal-time`.
+pub fn run(args: &EqualTimeArgs) -> Result<()> {
+    let mut times = args.times.clone();
+    if times.is_empty() || times.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
+        bail!("--times must be positive numbers of seconds, e.g. 1,2,4,8");
+    }
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(args.threads.unwrap_or(0))
+        .build()
+        .context("cannot configure the thread pool")?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let mut report = String::new();
+    let mut csv = String::from(
+        "scene,method,target_s,secs,spp,mean_err_r,mean_err_g,mean_err_b,block_rmse,pixel_rmse\n",
+    );
+    for scene in &args.scenes {
+        let (section, rows) = pool.install(|| scene_report(args, scene, &times))?;
+        print!("{section}");
+        report.push_str(&section);
+        csv.push_str(&rows);
+    }
+    for (name, text) in [("report.md", &report), ("report.csv", &csv)] {
+        let path = args.out.join(name);
+        std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    eprintln!("wrote {}", args.out.display());
+    Ok(())
+}
+
+/// One scene's Markdown section and CSV rows.
+fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(String, String)> {
+    let prepared = Arc::new(load_square(scene, args.size)?);
+    let (w, h) = (prepared.camera.width, prepared.camera.height);
+    let stem = scene
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "scene".into());
+    let converged = read_converged(&args.converged_dir, &stem, w, h)?;
+
+    let mut internal = prepared.scene.render.clone();
+    internal.method = Method::Internal;
+    internal.seed = args.seed;
+    args.internal.apply(&mut internal.internal);
+    internal.internal.validate(scene)?;
+    let mut reference = internal.clone();
+    reference.method = Method::Reference;
+    reference.seed = args.seed.wrapping_add(1);
+    if let Some(s) = converged.seed {
+        if s == internal.seed || s == reference.seed {
+            bail!(
+                "{stem}: the converged reference was rendered with seed {s}; choose another --seed"
+            );
+        }
+    }
+
+    let c = &converged.image.pixels;
+    let v = &converged.var;
+    let runs = [
+        (
+            "reference",
+            snapshots(
+                &prepared,
+                &reference,
+                times,
+                c,
+                v,
+                &format!("{stem} reference"),
+            )?,
+        ),
+        (
+            "internal",
+            snapshots(
+                &prepared,
+                &internal,
+                times,
+                c,
+                v,
+                &format!("{stem} internal"),
+            )?,
+        ),
+    ];
+
+    let (pixel_noise, block_noise, mean_se) = own_noise(&converged);
+    let i = &internal.internal;
+    let threads = rayon::current_num_threads();
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "\n### {stem} {w}×{h}, {threads} thread(s): equal time against the converged reference\n"
+    );
+    let _ = writeln!(
+        md,
+        "converged reference {} ({} spp): its own noise (median relative standard error over the brighter pixels) {:.2} % per pixel, {:.2} % per 8×8 block, removed from the RMSEs; its image mean ±{:.3} / {:.3} / {:.3} % (R/G/B, not removed)\n",
+        args.converged_dir.join(format!("{stem}.exr")).display(),
+        converged.spp.as_deref().unwrap_or("?"),
+        100.0 * pixel_noise,
+        100.0 * block_noise,
+        100.0 * mean_se.x,
+        100.0 * mean_se.y,
+        100.0 * mean_se.z,
+    );
+    let _ = writeln!(
+        md,
+        "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}, {} light sample(s), {}\n",
+        i.lights,
+        i.walks,
+        i.terms,
+        i.s_star.map_or("auto".to_owned(), |s| s.to_string()),
+        i.sh_order,
+        i.clock,
+        i.l1,
+        i.light_samples,
+        match i.resample_every {
+            0 => "one light set".to_owned(),
+            p => format!("a fresh light set every {p} passes"),
+        }
+    );
+    let _ = writeln!(
+        md,
+        "| method | T s | spent s | spp | mean err R | mean err G | mean err B | 8×8 block RMSE | pixel RMSE | targets (mean ≤ 3 %, block ≤ 5 %, pixel < reference) |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
+    let mut rows = String::new();
+    for (k, &target) in times.iter().enumerate() {
+        for (name, snaps) in &runs {
+            let s = snaps[k];
+            let e = s.errors;
+            let targets = if *name == "internal" {
+                let r = runs[0].1[k].errors;
+                let mark = |ok: bool| if ok { "yes" } else { "no" };
+                format!(
+                    "{} {} {}",
+                    mark(e.mean.abs().max_element() <= 0.03),
+                    mark(e.block <= 0.05),
+                    mark(e.pixel < r.pixel)
+                )
+            } else {
+                String::new()
+            };
+            let _ = writeln!(
+                md,
+                "| {name} | {target} | {:.2} | {} | {:+.2} % | {:+.2} % | {:+.2} % | {:.2} % | {:.2} % | {targets} |",
+                s.secs,
+                s.spp,
+                100.0 * e.mean.x,
+                100.0 * e.mean.y,
+                100.0 * e.mean.z,
+                100.0 * e.block,
+                100.0 * e.pixel,
+            );
+            let _ = writeln!(
+                rows,
+                "{stem},{name},{target},{:.4},{},{:.6},{:.6},{:.6},{:.6},{:.6}",
+                s.secs, s.spp, e.mean.x, e.mean.y, e.mean.z, e.block, e.pixel
+            );
+        }
+    }
+    Ok((md, rows))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A known pair: the converged image is 1 everywhere, the image 1.1 on
+    /// the left half and 0.9 on the right (64 × 16 pixels, so 8 × 2 blocks,
+    /// each on one side): mean error 0, block and pixel RMSE 0.1; with
+    /// the left half +0.1 and the right +0.0 in the red channel only the
+    /// red mean is off by +5 %.
+    #[test]
+    fn errors_of_a_known_pair() {
+        let (w, h) = (64, 16);
+        let converged = vec![Vec3::ONE; w * h];
+        let none = vec![Vec3::ZERO; w * h];
+        let halves: Vec<Vec3> = (0..w * h)
+            .map(|i| Vec3::splat(if i % w < w / 2 { 1.1 } else { 0.9 }))
+            .collect();
+        let e = errors(&halves, &converged, &none, w, h);
+        assert!(e.mean.abs().max_element() < 1e-5, "{e:?}");
+        assert!(
+            (e.block - 0.1).abs() < 1e-5 && (e.pixel - 0.1).abs() < 1e-5,
+            "{e:?}"
+        );
+        let red: Vec<Vec3> = (0..w * h)
+            .map(|i| Vec3::new(if i % w < w / 2 { 1.1 } else { 1.0 }, 1.0, 1.0))
+            .collect();
+        let e = errors(&red, &converged, &none, w, h);
+        assert!(
+            (e.mean.x - 0.05).abs() < 1e-5 && e.mean.y.abs() < 1e-6,
+            "{e:?}"
+        );
+        // Over all three channels: √(0.01 / 6) per pixel and per block.
+        let expected = (0.01f32 / 6.0).sqrt();
+        assert!((e.pixel - expected).abs() < 1e-5 && (e.block - expected).abs() < 1e-5);
+    }
+
+    /// End to end on a 16² thin sphere with a converged reference made
+    /// here: the table has both methods at both times, the spp grow with
+    /// the time, the reference's errors fall, and the CSV has a row each.
+    #[test]
+    fn equal_time_reports_both_methods_at_each_time() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+        let scene = root.join("assets/scenes/thin_sphere.ron");
+        let prepared = Arc::new(load_square(&scene, 16).unwrap());
+        let mut settings = prepared.scene.render.clone();
+        settings.seed = 99;
+        settings.spp = 4096;
+        let film = crate::cpu::render(prepared.clone(), &settings, |_| true);
+        let meta = vec![("lantern/seed".to_owned(), "99".to_owned())];
+        let conv = dir.path().join("thin_sphere.exr");
+        crate::render::export::write_exr_with_metadata(&conv, 16, 16, &film.mean(), &meta).unwrap();
+        crate::render::export::write_exr(&variance_path(&conv), 16, 16, &film.variance_of_mean())
+            .unwrap();
+        let args = EqualTimeArgs {
+            scenes: vec![scene],
+            converged_dir: dir.path().to_owned(),
+            times: vec![0.4, 0.1],
+            size: 16,
+            threads: Some(1),
+            seed: 5,
+            out: dir.path().join("out"),
+            internal: InternalArgs {
+                lights: Some(256),
+                walks: Some(8),
+                ..Default::default()
+            },
+        };
+        run(&args).unwrap();
+        let csv = std::fs::read_to_string(dir.path().join("out/report.csv")).unwrap();
+        let rows: Vec<Vec<&str>> = csv
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').collect())
+            .collect();
+        assert_eq!(rows.len(), 4, "{csv}");
+        let of = |method: &str| -> Vec<(f64, u32, f64)> {
+            rows.iter()
+                .filter(|r| r[1] == method)
+                .map(|r| {
+                    (
+                        r[3].parse().unwrap(),
+                        r[4].parse().unwrap(),
+                        r[9].parse().unwrap(),
+                    )
+                })
+                .collect()
+        };
+        for method in ["reference", "internal"] {
+            let r = of(method);
+            assert_eq!(r.len(), 2, "{csv}");
+            assert!(r[0].0 >= 0.1 && r[1].0 >= 0.4, "{csv}");
+            assert!(r[1].1 > r[0].1, "{csv}");
+        }
+        let r = of("reference");
+        assert!(r[1].2 < r[0].2, "{csv}");
+        let md = std::fs::read_to_string(dir.path().join("out/report.md")).unwrap();
+        assert!(
+            md.contains("| internal | 0.4 |") && md.contains("8×8 block RMSE"),
+            "{md}"
+        );
+        // The converged image's seed is refused for the renders.
+        let same = EqualTimeArgs { seed: 99, ..args };
+        assert!(run(&same).is_err());
+    }
+}
