@@ -131,6 +131,7 @@ fn renewals_start_every_p_passes() {
             })
             .collect::<Vec<_>>()
     };
+    settings.internal.resample_every = 0;
     assert_eq!(starts(&settings), vec![]);
     settings.internal.resample_every = 4;
     assert_eq!(starts(&settings), vec![(4, 1), (8, 2), (12, 3)]);
