@@ -590,10 +590,9 @@ fn render_command(
     }
     let t_load = Instant::now();
     let scene = Scene::load(scene_path)?;
-    crate::render::limits::check_image_memory(
+    crate::render::limits::check_image_fits(
         scene.camera.width,
         scene.camera.height,
-        crate::render::limits::available_memory(),
         &format!("{}: camera.width/height", scene_path.display()),
     )
     .map_err(anyhow::Error::msg)?;
@@ -1032,10 +1031,9 @@ fn bench_command(
             scene.camera.height = s.height;
             scene.validate(&path)?;
         }
-        crate::render::limits::check_image_memory(
+        crate::render::limits::check_image_fits(
             scene.camera.width,
             scene.camera.height,
-            crate::render::limits::available_memory(),
             &format!("{}: --size", path.display()),
         )
         .map_err(anyhow::Error::msg)?;

@@ -154,6 +154,15 @@ pub fn variance_path(converged: &Path) -> PathBuf {
     converged.with_file_name(format!("{stem}_var.exr"))
 }
 
+/// How often a render renews its internal lights, in words (the reports'
+/// settings line).
+pub fn renewal_text(resample_every: u32) -> String {
+    match resample_every {
+        0 => "one light set".to_owned(),
+        p => format!("a fresh light set every {p} passes"),
+    }
+}
+
 /// What a pair of independent renders `a1`, `a2` (same settings, other
 /// seeds) says about their expectation against `converged`: the bias,
 /// `√(mean (ā − c)² − mean Var[c] − mean (a1 − a2)²/4)` (the squared error
@@ -528,10 +537,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
         i.l1,
         i.window_scatters,
         i.view_walks,
-        match i.resample_every {
-            0 => "one light set".to_owned(),
-            p => format!("a fresh light set every {p} passes"),
-        }
+        renewal_text(i.resample_every)
     );
     let _ = writeln!(
         report,

@@ -362,10 +362,7 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
         i.clock,
         i.l1,
         i.light_samples,
-        match i.resample_every {
-            0 => "one light set".to_owned(),
-            p => format!("a fresh light set every {p} passes"),
-        }
+        crate::converge::renewal_text(i.resample_every)
     );
     let _ = writeln!(
         md,

@@ -136,13 +136,7 @@ pub fn load_square(scene: &Path, size: u32) -> Result<Prepared> {
     } else {
         (size, size)
     };
-    crate::render::limits::check_image_memory(
-        w,
-        h,
-        crate::render::limits::available_memory(),
-        "--size",
-    )
-    .map_err(anyhow::Error::msg)?;
+    crate::render::limits::check_image_fits(w, h, "--size").map_err(anyhow::Error::msg)?;
     if size == 0 {
         return Ok(prepared);
     }

@@ -87,6 +87,12 @@ pub fn check_image_memory(
     }
 }
 
+/// [`check_image_memory`] against this machine's [`available_memory`]:
+/// what the commands check before they render.
+pub fn check_image_fits(width: u32, height: u32, what: &str) -> Result<(), String> {
+    check_image_memory(width, height, available_memory(), what)
+}
+
 /// Checks a `--threads` value against `cores`: at least 1 and at most
 /// [`MAX_THREADS_PER_CORE`] per core. More threads than cores is allowed
 /// with a warning (returned), since they only add overhead.
