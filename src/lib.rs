@@ -20,7 +20,7 @@
 //! ui/       the interactive previewer (eframe, egui, rfd): the only UI code
 //! cli.rs    headless rendering, export and benchmarks
 //! atomic.rs files written whole or not at all (every writer uses it)
-//! doc/      these documentation pages: method, validation, formats (no code)
+//! doc/      the documentation pages: method, validation, formats (no code)
 //! ```
 //!
 //! `scene` and `physics` are leaves and never import each other (`scene`
