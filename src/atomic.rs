@@ -56,7 +56,7 @@ fn kept_text(path: &Path, kept: bool) -> String {
 static COUNTER: AtomicU64 = AtomicU64::new(0);
 
 /// The file a write to `path` replaces: `path` itself, or for a symbolic
-/// link the file it names (links followed up to [`MAX_LINKS`] deep; a
+/// link the file it names (links followed up to `MAX_LINKS` deep; a
 /// dangling link resolves to where it points).
 pub fn resolve_target(path: &Path) -> io::Result<PathBuf> {
     let mut current = path.to_owned();

@@ -2,8 +2,8 @@
 //! one run (issue 3's equal-error time ratio).
 //!
 //! A converged reference image is rendered first (or read from an EXR
-//! written by an earlier run). Then the reference path tracer (METHOD.md
-//! §2) and the internal-lights renderer (§3–§6; its clock starts before
+//! written by an earlier run). Then the reference path tracer ([method
+//! §2](crate::doc::method)) and the internal-lights renderer (§3–§6; its clock starts before
 //! placement and walks, so re-sampling is paid for) render progressively
 //! with other seeds; at checkpoints spaced by a factor `√2` in samples the
 //! clock is paused and the image's RMSE against the converged one, relative

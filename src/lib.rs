@@ -4,8 +4,10 @@
 //! Tessendorf's idea of *multiple scatter as internal lights*: light that
 //! has travelled `k·s*` becomes a source `J`, sampled at points placed by
 //! density, and a short single-scatter ray march over `s*` gathers them.
-//! The physics is specified in the project's `METHOD.md`; each module says
-//! which part it implements.
+//! The method is explained in [`doc::method`], whose numbered sections the
+//! modules cite ("method §n") for the part they implement; [`doc`] holds
+//! the other pages (the reference renderer, the scene format, the
+//! validation studies, the GPU backend, the architecture).
 //!
 //! ## Layers and the dependency rule
 //!
@@ -18,6 +20,7 @@
 //! ui/       the interactive previewer (eframe, egui, rfd): the only UI code
 //! cli.rs    headless rendering, export and benchmarks
 //! atomic.rs files written whole or not at all (every writer uses it)
+//! doc/      the documentation pages: method, validation, formats (no code)
 //! ```
 //!
 //! `scene` and `physics` are leaves and never import each other (`scene`
@@ -30,6 +33,7 @@ pub mod atomic;
 pub mod cli;
 pub mod converge;
 pub mod cpu;
+pub mod doc;
 pub mod equal_time;
 pub mod gpu;
 pub mod noise;

@@ -1,5 +1,5 @@
 //! `lantern noise`: where the internal-lights image's noise comes from
-//! (METHOD.md §4–§7: walk noise against the gather's own), measured.
+//! ([method §4–§7](crate::doc::method): walk noise against the gather's own), measured.
 //!
 //! Three measurements, each relative to the mean of the whole image:
 //!

@@ -1,5 +1,5 @@
 //! `lantern validate`: how close the internal-lights method comes to the
-//! reference, and how the error moves with `s*`, `N` and `M` (METHOD.md §7).
+//! reference, and how the error moves with `s*`, `N` and `M` ([method §7](crate::doc::method)).
 //!
 //! Renders the reference at a high sample count, then the internal-lights
 //! method over three sweeps around the given base settings: `s*` shrinking

@@ -1,4 +1,4 @@
-//! The internal-lights image against the reference image (METHOD.md §7:
+//! The internal-lights image against the reference image ([method §7](lantern::doc::method):
 //! at generous settings the method converges to the reference): the
 //! acceptance tests of the internal-lights issue.
 //!
@@ -131,8 +131,8 @@ fn puffs_grid_agrees_with_reference() {
 /// part. Near a puff's surface the chance that a walk collides before it
 /// leaves falls steeply across directions and depth, and reconstructed
 /// as it was the dim edges of the puffs came out bright (+19.5 % / +13.3 %
-/// in the two dimmest fifths at 96², README "What the internal lights
-/// converge to"); stored per unit chance of the collision they follow the
+/// in the two dimmest fifths at 96², historical: lantern::doc::validation
+/// §4); stored per unit chance of the collision they follow the
 /// reference. The dimmer half of the cloud's pixels (by the reference)
 /// is asserted within 5 % in mean, and the image within 3 %.
 #[test]

@@ -1,4 +1,4 @@
-// The final gather of the internal-lights method (METHOD.md §6). Mirrors
+// The final gather of the internal-lights method (src/doc/method.md §6). Mirrors
 // `gather` and `field_l1_at` in src/physics/gather.rs, part for part. The
 // window `[0, w]` of the camera ray is cut into `samples` strata with one
 // jittered point `y` each (transmittance `T(x, y)` by ratio tracking),

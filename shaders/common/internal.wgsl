@@ -1,4 +1,4 @@
-// Evaluating the cached internal lights (METHOD.md §5, §6). Mirrors the
+// Evaluating the cached internal lights (src/doc/method.md §5, §6). Mirrors the
 // read side of `InternalLights` in src/physics/internal.rs: `S₁` from the
 // stored arriving light, the multiply scattered part from its SH
 // coefficients (clamped at zero for one light), and the kernel

@@ -1,4 +1,4 @@
-// Spatial indices over the internal lights (METHOD.md §6). Mirrors the
+// Spatial indices over the internal lights (src/doc/method.md §6). Mirrors the
 // lookups of `LightGrid` in src/physics/light_index.rs: bucket grids whose
 // cell `c` lists `ids[starts[c]..starts[c+1]]`, cells x fastest.
 

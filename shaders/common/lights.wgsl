@@ -1,4 +1,4 @@
-// External lights in the form the estimators use (METHOD.md §1). Mirrors
+// External lights in the form the estimators use (src/doc/method.md §1). Mirrors
 // src/physics/lights.rs: what one light delivers at a point, before
 // attenuation.
 

@@ -1,4 +1,4 @@
-// The Henyey–Greenstein phase function (METHOD.md §1). Mirrors
+// The Henyey–Greenstein phase function (src/doc/method.md §1). Mirrors
 // src/physics/phase.rs: `P(μ) = (1 − g²) / (4π (1 + g² − 2gμ)^{3/2})`, μ the
 // cosine between the directions light travels before and after scattering.
 

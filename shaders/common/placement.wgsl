@@ -1,4 +1,4 @@
-// Placement of the internal lights (METHOD.md §5): a point with density
+// Placement of the internal lights (src/doc/method.md §5): a point with density
 // `p(x) = (1 − u) ρ̃(x)/Z + u/|B|` and that pdf. Mirrors
 // `PlacementDensity::sample` and `PlacementDensity::pdf` of
 // src/physics/placement.rs: `ρ̃` is the trilinear interpolant of `ρ` at the

@@ -1,4 +1,4 @@
-// The unbiased reference estimator (METHOD.md §2). Mirrors
+// The unbiased reference estimator (src/doc/method.md §2). Mirrors
 // src/physics/reference.rs: a volumetric path tracer with spectral tracking
 // for free flights, ratio tracking for shadow rays, next-event estimation to
 // every light, and Russian roulette. Paths are traced backwards from the

@@ -1,4 +1,4 @@
-// Real spherical harmonics, orders 0..=4 (METHOD.md §5: the angular part
+// Real spherical harmonics, orders 0..=4 (src/doc/method.md §5: the angular part
 // of the internal lights). Mirrors src/physics/sh.rs: orthonormal real
 // basis with the Condon–Shortley phase, coefficient `l(l+1) + m`, evaluated
 // without trigonometry from `(x + iy)^m` and the recurrence for

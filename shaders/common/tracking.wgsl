@@ -1,5 +1,5 @@
 // Free-flight sampling and transmittance estimation against the majorant
-// grid (METHOD.md §2, §4). Mirrors src/physics/tracking.rs:
+// grid (src/doc/method.md §2, §4). Mirrors src/physics/tracking.rs:
 //
 // - `sample_tentative`: exponential steps against the local majorant. The
 //   CPU calls back at each tentative collision; here it is an iterator

@@ -1,4 +1,4 @@
-// The medium as the estimators see it (METHOD.md §1). Mirrors
+// The medium as the estimators see it (src/doc/method.md §1). Mirrors
 // src/physics/volume.rs, with the density sources of src/scene/mod.rs
 // (`Density`) and the voxel lookup of src/scene/grid.rs.
 

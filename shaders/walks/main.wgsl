@@ -1,4 +1,4 @@
-// The internal lights' walks (METHOD.md §4, §5): one workgroup per light,
+// The internal lights' walks (src/doc/method.md §4, §5): one workgroup per light,
 // one time-gated walk per invocation and dispatch. Mirrors the walk loop of
 // `InternalLights::build_at` in src/physics/internal.rs: `K` directions on a
 // spherical Fibonacci lattice under a random rotation, one

@@ -1,6 +1,6 @@
 //! Which internal lights make a pixel, and by how much: a deterministic
 //! estimate of each light's part of the internal-light terms (`L₀`'s
-//! reconstruction and `L₁`, METHOD.md §6) along one camera ray, for the
+//! reconstruction and `L₁`, [method §6](crate::doc::method)) along one camera ray, for the
 //! previewer's "lights of this pixel" mode.
 //!
 //! The window of the ray is cut into [`STEPS`] midpoints. At each, the

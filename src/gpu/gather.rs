@@ -1,4 +1,4 @@
-//! The final gather of the internal-lights method (METHOD.md §6) on the
+//! The final gather of the internal-lights method ([method §6](crate::doc::method)) on the
 //! GPU, both forms of `L₁` (the field form and the point lights,
 //! [`L1Form`], chosen in the uniform), with the internal lights built on
 //! the CPU ([`InternalLights::build`]) or on the GPU

@@ -6,7 +6,7 @@
 //! compile-time size check; change a field here and in the shader together.
 //!
 //! The conversions from the prepared scene live here too, so that what the
-//! GPU sees is defined in one place (METHOD.md §1: the medium, its box and
+//! GPU sees is defined in one place ([method §1](crate::doc::method): the medium, its box and
 //! majorants, the external lights).
 
 use bytemuck::{Pod, Zeroable};

@@ -6,11 +6,11 @@
 //! - [`mirrors`]: `#[repr(C)]` twins of the shader structs, size-checked.
 //! - [`shaders`]: the WGSL files and how modules are assembled from them.
 //! - [`renderer`]: progressive rendering, one dispatch per pass,
-//!   accumulating on the GPU; the reference path tracer (METHOD.md §2).
-//! - [`gather`]: the internal-lights final gather (METHOD.md §6) with the
+//!   accumulating on the GPU; the reference path tracer ([method §2](crate::doc::method)).
+//! - [`gather`]: the internal-lights final gather ([method §6](crate::doc::method)) with the
 //!   lights built on the CPU and uploaded with their SH coefficients and
 //!   spatial indices.
-//! - [`walks`]: the internal lights built on the GPU (METHOD.md §4–§5):
+//! - [`walks`]: the internal lights built on the GPU ([method §4–§5](crate::doc::method)):
 //!   placement, time-gated walks and SH projection, finished by the CPU's
 //!   spatial indices.
 //! - [`display`]: the previewer's display pass (accumulation to an 8-bit

@@ -4,7 +4,7 @@
 //! [`GpuRenderer`] serves both estimators; they differ in their shader
 //! module and the buffers bound after the scene's.
 //!
-//! The reference method (METHOD.md §2, `shaders/common/reference.wgsl`,
+//! The reference method ([method §2](crate::doc::method), `shaders/common/reference.wgsl`,
 //! entry point in `shaders/reference/main.wgsl`) mirrors
 //! `cpu::Renderer::pass`: the same random stream per (seed, pixel, pass),
 //! the same pixel jitter, the same estimator (`physics::reference`), so the

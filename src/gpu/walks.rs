@@ -1,4 +1,4 @@
-//! The internal lights built on the GPU (METHOD.md §4–§5): placement of the
+//! The internal lights built on the GPU ([method §4–§5](crate::doc::method)): placement of the
 //! `M` lights with density `p ∝ (1 − u) ρ̃/Z + u/|B|` and their weights
 //! `V_i = 1/(M p(x_i))`, then `K` time-gated walks per light estimating
 //! `J_N(x_i, ·)` with both clocks, projected onto real SH, with the per-term
@@ -16,7 +16,7 @@
 //!   per invocation and dispatch; `⌈K/64⌉` dispatches add their sums to
 //!   one output buffer (`shaders/walks/main.wgsl`). Splitting `K` over
 //!   dispatches keeps each invocation short: lavapipe caps an invocation's
-//!   loop iterations (see the README), and hardware drivers time out long
+//!   loop iterations (see [the GPU page](crate::doc::gpu)), and hardware drivers time out long
 //!   dispatches.
 //!
 //!   With view walks (`InternalParams::view_walks`) each light's walks

@@ -1,5 +1,5 @@
 //! The time-gated backward walk that estimates the path-length series
-//! `J_N = Σ_{k=0}^{N} G(k s*) S₁` at a point (METHOD.md §3–§4).
+//! `J_N = Σ_{k=0}^{N} G(k s*) S₁` at a point ([method §3–§4](crate::doc::method)).
 //!
 //! # What the walk estimates
 //!
@@ -45,7 +45,7 @@
 //!
 //! # The optical-depth clock
 //!
-//! METHOD.md §7 also allows the clock `dτ = c dℓ`. With RGB extinction one
+//! [method §7](crate::doc::method) also allows the clock `dτ = c dℓ`. With RGB extinction one
 //! clock must serve all channels; this module uses the **grey extinction
 //! `c_g = max(σ_t) ρ`** (the channel that scatters most, which is also what
 //! the majorant grid bounds). In a grey medium real collisions are then a
@@ -93,7 +93,7 @@ pub enum Clock {
     /// Geometric path length `ℓ`: gates at `ℓ = k s*` (the note's choice).
     Geometric,
     /// Grey optical depth `τ = ∫ max(σ_t) ρ dℓ`: gates at `τ = k s*`, so
-    /// that each window holds on average `s*` collisions (METHOD.md §7).
+    /// that each window holds on average `s*` collisions ([method §7](crate::doc::method)).
     OpticalDepth,
 }
 
@@ -1606,7 +1606,7 @@ mod tests {
         );
 
         // Heterogeneous, optical-depth clock: Poisson(τ*) per window
-        // whatever the density (METHOD.md §7), on split and whole cells: a
+        // whatever the density (src/doc/method.md §7), on split and whole cells: a
         // dense field (majorant optical depth 0.84 across a cell, over two
         // quarters of τ* = 1.3: three steps per cell) and a thin one (0.26:
         // one step).

@@ -1,4 +1,4 @@
-//! The final gather of the internal-lights method (METHOD.md §6): the
+//! The final gather of the internal-lights method ([method §6](crate::doc::method)): the
 //! radiance at the point `x` where a camera ray enters the medium's box,
 //! `L ≈ L₀ + L₁`, from a window of the path-length clock that starts at `x`.
 //!
@@ -40,7 +40,7 @@
 //!     at 256² this cut `L₁`'s per-pass variance 11 % and the march to the
 //!     budget's end) — so `d³x' = r² dr dn'` cancels the `1/r²` and no
 //!     bounded kernel is needed.
-//!   - *points* (the note's eq. 23, METHOD.md §6): the sum over the
+//!   - *points* (the note's eq. 23, [method §6](crate::doc::method)): the sum over the
 //!     internal lights `Σ V_i b P T T J_i / (r² + h₁²)` with the bounded
 //!     kernel (`h₁`: [`InternalLights::softening`]). Each sample draws one
 //!     light: a cluster with probability `∝ P_c / (d_c² + h₁²)` (`P_c`: the
@@ -58,7 +58,7 @@
 //! when the window is short next to the light spacing (a dense medium at
 //! small `s*`) the points form loses much of `L₁`: on the chromatic sphere
 //! at `s* = 0.25` mean free paths the red channel came out 11.5 % low with
-//! points and 4.5 % low with the field (README, "Validation").
+//! points and 4.5 % low with the field ([validation](crate::doc::validation) §4).
 
 use glam::Vec3;
 
@@ -84,8 +84,8 @@ use super::volume::{DensityField, Volume};
 /// gather fell from 31.4 % to 20.6 % of the image mean (single scatter
 /// 12.2 → 4.0 %) for 13 % more time per pass, 2.05× less variance per
 /// second; at 2 points per ray 73.1 → 55.6 % for 18 % more, 1.46×. The
-/// walks keep rate 1: their noise is their paths' (README, "Where the
-/// noise comes from").
+/// walks keep rate 1: their noise is their paths' ([validation](crate::doc::validation)
+/// §4, "Tried and not kept").
 pub const TRACKING_RATE: f32 = 8.0;
 
 /// The most stratified points per camera ray ([`gather`]'s `samples`;
@@ -428,7 +428,7 @@ pub fn gather<D: DensityField>(
 /// `x'` towards `x''` within what is left of the budget, so that the
 /// source at `x''` has travelled `x'' → x' → y` with the clock from `x` to
 /// `x''` at most `s*` (the next terms of the expansion of `G(s)` inside
-/// the window by number of scatterings, METHOD.md §6's `G ≈ G_SS` being
+/// the window by number of scatterings, [method §6](crate::doc::method)'s `G ≈ G_SS` being
 /// its first two).
 #[allow(clippy::too_many_arguments)]
 fn field_l1_at<D: DensityField>(
@@ -594,7 +594,7 @@ mod tests {
 
     /// The kernel reconstruction (which reads copies of the lights in the
     /// fine grid's order and sums their coefficients before evaluating
-    /// the series) is the normalised kernel average of METHOD.md §6
+    /// the series) is the normalised kernel average of [method §6](crate::doc::method)
     /// computed light by light over all lights, for both parts, both
     /// clocks (the optical-depth one averages `J_i / c_g(x_i)` and
     /// multiplies by `c_g(p)`) and SH order 4, up to rounding.
@@ -865,7 +865,7 @@ mod tests {
     }
 
     /// One isotropic internal light in a homogeneous cube gathers, on
-    /// average, to the quadrature of METHOD.md §6's `L₀` (its kernel
+    /// average, to the quadrature of [method §6](crate::doc::method)'s `L₀` (its kernel
     /// reconstruction: `J` within `h` of the light, its collided part times
     /// the chance of a collision before the far face) plus `L₁`, for both
     /// clocks (which agree here: with ρ = 1, τ = σ_t ℓ).

@@ -1,4 +1,4 @@
-//! The internal lights (METHOD.md §5): `M` points placed by density, each
+//! The internal lights ([method §5](crate::doc::method)): `M` points placed by density, each
 //! with the volume `V_i` it stands for and the path-length series
 //! `J_N(x_i, ·)` estimated by `K` time-gated walks (§4) and stored as real
 //! spherical harmonics, with `F = G(s*) S₁` (the `k = 1` term) kept apart.
@@ -45,7 +45,7 @@
 //! times the variance of a walk's value in the one direction it
 //! estimates; on the puffs `K_v` = 16 walks towards the eye took the
 //! light sets' noise in `L₀` from 31.9 % to 7.5 % of the image mean
-//! (README, "Walks towards the eye"). The spherical harmonics still serve
+//! ([validation](crate::doc::validation) §4). The spherical harmonics still serve
 //! `L₁`, `F` and the gizmos.
 //!
 //! Only the lights within the kernel's reach of the camera rays' windows
@@ -139,7 +139,7 @@ pub struct InternalParams {
     /// The form of the gather's `L₁`.
     pub l1: L1Form,
     /// Scatterings inside the final window that the field form of `L₁`
-    /// follows: 1 is METHOD.md §6's single-scatter kernel `G ≈ G_SS`;
+    /// follows: 1 is [method §6](crate::doc::method)'s single-scatter kernel `G ≈ G_SS`;
     /// each more adds the next term of `G(s)` inside the window
     /// (1 ..= [`MAX_WINDOW_SCATTERS`]).
     pub window_scatters: u32,
@@ -185,7 +185,7 @@ pub const KERNEL_NEIGHBOURS: usize = 64;
 pub const MAX_WINDOW_SCATTERS: u32 = 3;
 
 /// `h₁ / h`: `L₁`'s kernel `1/(r² + h₁²)` is softened far less than the
-/// reconstruction averages. Its bias (METHOD.md §6: it vanishes as
+/// reconstruction averages. Its bias ([method §6](crate::doc::method): it vanishes as
 /// `h₁ → 0`) is an underestimate of the light within `h₁` of each internal
 /// light, which with `h₁ = h` was the largest error at small `s*` (the
 /// window's reach `s*` is then comparable to `h`); its variance is cheap,
@@ -209,8 +209,8 @@ pub enum Part {
     /// directions that leave the medium;
     /// projected as it was, order-4 harmonics and a kernel that reaches
     /// lights deeper in smeared that horizon, and the dim edges of the
-    /// puffs came out 7…20 % bright at small `s*` (README, "What the
-    /// internal lights converge to").
+    /// puffs came out 7…20 % bright at small `s*` ([validation](crate::doc::validation)
+    /// §4).
     Scattered,
 }
 
@@ -1001,7 +1001,7 @@ impl InternalLights {
     }
 
     /// The kernel reconstruction of the multiply scattered part of `J` at
-    /// `p` towards `n` (METHOD.md §6): `Σ K_h J_i / Σ K_h` over the lights
+    /// `p` towards `n` ([method §6](crate::doc::method)): `Σ K_h J_i / Σ K_h` over the lights
     /// within `h`, with `K_h(r) = (1 − r²/h²)²`; for the optical-depth clock
     /// the average is taken of `J_i / c_g(x_i)` and multiplied by `c_g(p)`.
     /// Zero where no light is within `h`. `part` says which part of
@@ -1012,7 +1012,7 @@ impl InternalLights {
     /// expectation over sets, and the clamp's `E[max(X, 0)] ≥ max(E[X], 0)`
     /// would bias it upwards wherever `J` is small next to its walk noise
     /// (puffs at 96², SH order 4, K 64, a fresh set every 2 passes: bias
-    /// 8.61 % clamped, 7.30 % unclamped; README, "Validation"). Left
+    /// 8.61 % clamped, 7.30 % unclamped; [validation](crate::doc::validation) §4). Left
     /// unclamped the reconstruction is linear in the lights' coefficients.
     pub fn reconstruct_multi(&self, p: Vec3, n: Vec3, density_at_p: f32, part: Part) -> Vec3 {
         let scale_p = self.reconstruction_scale(density_at_p);

@@ -1,4 +1,4 @@
-//! Spatial indices over the internal lights (METHOD.md §6: "the window `s*`
+//! Spatial indices over the internal lights ([method §6](crate::doc::method): "the window `s*`
 //! is also a locality radius"): a uniform grid that lists the lights near a
 //! point, for the kernel reconstruction of `J` along a camera ray, and a
 //! coarse grid of light clusters with their power, from which the final

@@ -1,4 +1,4 @@
-//! External lights in the form the estimators use (METHOD.md §1): unit
+//! External lights in the form the estimators use ([method §1](crate::doc::method)): unit
 //! directions, and the first-scatter source `S₁` they produce at a point.
 
 use glam::Vec3;

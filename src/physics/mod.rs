@@ -1,6 +1,6 @@
 //! Pure mathematics of light transport on `glam` types: random numbers,
 //! the Henyey–Greenstein phase function, majorant grids, delta/spectral and
-//! ratio tracking, and the estimators built from them (METHOD.md §1–§2).
+//! ratio tracking, and the estimators built from them ([method §1–§2](crate::doc::method)).
 //!
 //! This layer is a leaf: it knows nothing of scene files, of threads or of
 //! the user interface. A medium is anything that implements

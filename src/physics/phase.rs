@@ -1,4 +1,4 @@
-//! The Henyey–Greenstein phase function (METHOD.md §1).
+//! The Henyey–Greenstein phase function ([method §1](crate::doc::method)).
 //!
 //! `P(μ) = (1 − g²) / (4π (1 + g² − 2gμ)^{3/2})`, where `μ` is the cosine
 //! between the directions light travels before and after scattering; `g > 0`

@@ -1,4 +1,4 @@
-//! Placement of the `M` internal lights (METHOD.md §5): positions `x_i`
+//! Placement of the `M` internal lights ([method §5](crate::doc::method)): positions `x_i`
 //! drawn with density `p(x) ∝ (1 − u) ρ(x)/∫ρ + u/|B|`, each with the
 //! volume it stands for, `V_i = 1 / (M p(x_i))`, so that
 //! `Σ_i V_i f(x_i)` is an unbiased estimate of `∫_B f`.

@@ -1,4 +1,4 @@
-//! The unbiased reference estimator (METHOD.md §2): a volumetric path tracer
+//! The unbiased reference estimator ([method §2](crate::doc::method)): a volumetric path tracer
 //! with spectral tracking for free flights, ratio tracking for shadow rays,
 //! next-event estimation to every light, and Russian roulette.
 //!

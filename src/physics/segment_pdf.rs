@@ -1,5 +1,5 @@
 //! Where the final gather puts its points along a stretch of a ray
-//! (METHOD.md §6: the integrals over the camera ray's `t` of `L₀` and `L₁`,
+//! ([method §6](crate::doc::method): the integrals over the camera ray's `t` of `L₀` and `L₁`,
 //! and over the distance `r` to `L₁`'s sources).
 //!
 //! With the optical-depth clock every integrand of the gather carries the

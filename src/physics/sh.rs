@@ -1,5 +1,5 @@
 //! Real spherical harmonics for the angular part of the internal lights
-//! (METHOD.md §5: `J_i(n')` and `F_i(n')` are projected onto real SH of a
+//! ([method §5](crate::doc::method): `J_i(n')` and `F_i(n')` are projected onto real SH of a
 //! chosen order, because the multiple-scatter part is smooth in angle).
 //!
 //! The basis is the usual orthonormal real basis with the Condon–Shortley

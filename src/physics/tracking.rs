@@ -1,5 +1,5 @@
 //! Free-flight sampling and transmittance estimation against a majorant
-//! grid: the one tracking loop that every estimator calls (METHOD.md §2,
+//! grid: the one tracking loop that every estimator calls ([method §2](crate::doc::method),
 //! §4), in the manner of pbrt-v4's `SampleT_maj`.
 //!
 //! - [`sample_tentative`]: exponential steps ([`TentativeSteps`]) against

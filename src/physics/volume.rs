@@ -1,6 +1,6 @@
 //! The medium as the estimators see it: a density field with its box,
 //! RGB extinction and albedo, the phase function's `g`, and a majorant grid
-//! (METHOD.md §1).
+//! ([method §1](crate::doc::method)).
 
 use glam::Vec3;
 

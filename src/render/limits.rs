@@ -33,7 +33,8 @@ pub const MANY_LIGHTS: usize = 16;
 pub const MANY_WALKS: u64 = 1 << 26;
 
 /// Walks per second assumed for that estimate: about what two cores do on
-/// the example scenes at `N = 32` (README "Re-sampling speed": `M = 4096`,
+/// the example scenes at `N = 32` ([validation](crate::doc::validation) §4,
+/// "Re-sampling speed": `M = 4096`,
 /// `K = 64` in 0.1–0.25 s).
 pub const WALKS_PER_SECOND: f64 = 1.0e6;
 

@@ -3,8 +3,8 @@
 //!
 //! Baking makes the procedural cloud a grid like any other, so both
 //! renderers, the majorant grid and an exported `.vol` for another renderer
-//! all see exactly the same `ρ` (METHOD.md §1: "a procedural field or a voxel
-//! grid, trilinearly interpolated").
+//! all see exactly the same `ρ` ([method §1](crate::doc::method): a procedural field or a voxel
+//! grid, trilinearly interpolated).
 
 use std::path::Path;
 

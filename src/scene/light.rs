@@ -1,4 +1,4 @@
-//! External lights: a sun and point lights (METHOD.md §1).
+//! External lights: a sun and point lights ([method §1](crate::doc::method)).
 //!
 //! Units follow Mitsuba 3: the sun is its `directional` emitter (`direction`
 //! is the direction light travels, `irradiance` in W/m² on a surface

@@ -1,5 +1,5 @@
 //! The participating medium: where the density is, how strongly it
-//! extinguishes and scatters, and its phase function (METHOD.md §1).
+//! extinguishes and scatters, and its phase function ([method §1](crate::doc::method)).
 //!
 //! Extinction is `c(x) = density_scale · σ_t · ρ(x)` per RGB channel and
 //! scattering `b(x) = α c(x)`, exactly as Mitsuba 3's `heterogeneous` medium

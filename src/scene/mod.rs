@@ -1,6 +1,6 @@
 //! What is rendered: camera, medium, density sources, lights and render
 //! settings, read from and written to RON, plus the loaders that turn a
-//! density source into something that can be evaluated (METHOD.md §1).
+//! density source into something that can be evaluated ([method §1](crate::doc::method)).
 //!
 //! This layer is a leaf: it knows nothing of the estimators. Every value that
 //! comes from a file is validated here, so that the renderers can assume

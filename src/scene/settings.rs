@@ -1,21 +1,21 @@
 //! Render settings stored with the scene: which estimator, how many
 //! samples, the seed that makes a render reproducible, and the parameters
-//! of the internal-lights method (METHOD.md §3–§7).
+//! of the internal-lights method ([method §3–§7](crate::doc::method)).
 
 use serde::{Deserialize, Serialize};
 
 /// Which estimator renders the image.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Method {
-    /// The unbiased volumetric path tracer (METHOD.md §2): the ground truth.
+    /// The unbiased volumetric path tracer ([method §2](crate::doc::method)): the ground truth.
     #[default]
     Reference,
-    /// Multiple scatter as internal lights (METHOD.md §3–§6).
+    /// Multiple scatter as internal lights ([method §3–§6](crate::doc::method)).
     Internal,
 }
 
 /// What the path-length clock of the internal-lights method counts
-/// (METHOD.md §3, §7).
+/// ([method §3, §7](crate::doc::method)).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ClockKind {
     /// Geometric path length, as in Tessendorf's note: `s*` is a distance.
@@ -26,8 +26,8 @@ pub enum ClockKind {
     OpticalDepth,
 }
 
-/// The form of the final gather's single-scatter term `L₁` (METHOD.md §6;
-/// the README's "The internal-lights renderer" says how they differ).
+/// The form of the final gather's single-scatter term `L₁` ([method §6](crate::doc::method);
+/// §6.3 there says how they differ).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum L1Kind {
     /// One scattering of the kernel-reconstructed field `J` (no bounded
@@ -73,19 +73,19 @@ pub struct InternalSettings {
     /// The form of the gather's `L₁`.
     pub l1: L1Kind,
     /// Scatterings inside the final window that the field form of `L₁`
-    /// follows: 1 is the note's single-scatter kernel (METHOD.md §6), 2
-    /// and 3 add the next terms of the window's transport (see the
-    /// README, "Scatterings inside the window").
+    /// follows: 1 is the note's single-scatter kernel ([method §6](crate::doc::method)), 2
+    /// and 3 add the next terms of the window's transport ([method
+    /// §6.4](crate::doc::method)).
     pub window_scatters: u32,
     /// Walks per light along the direction towards the camera, for the
     /// view's `L₀` (0: none, `L₀` reads the lights' spherical harmonics;
-    /// see the README, "Walks towards the eye").
+    /// see [method §5.4](crate::doc::method)).
     pub view_walks: u32,
     /// Internal-light samples per camera sample in the final gather.
     pub light_samples: u32,
     /// Share of the `M` lights placed in the windows of the camera's rays
-    /// rather than by density (0 ..= 1; see the method documentation,
-    /// "Lights where the camera reads them"). Ties the lights to the
+    /// rather than by density (0 ..= 1; see [method
+    /// §5.2](crate::doc::method)). Ties the lights to the
     /// camera: moving it re-samples them.
     pub view_share: f32,
     /// Passes rendered with one set of internal lights before a fresh set

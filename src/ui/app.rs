@@ -439,7 +439,7 @@ impl LanternApp {
                 // shaders on the CPU cores, at about half the CPU renderer's
                 // speed and in passes that cannot be interrupted, which
                 // stalls the window (measured on the cloud at 512²: 3 frames/s
-                // against 9.5, README "Previewer"); start on the CPU there
+                // against 9.5, src/doc/validation.md §4); start on the CPU there
                 // and say so. The switch still selects the GPU.
                 if let Ok(ctx) = &gpu {
                     if ctx.is_software() && app.session.backend == Backend::Gpu {

@@ -1,6 +1,6 @@
 //! The side panel: the method's four knobs (`s*`, `M`, `g`, `N`) first,
 //! then collapsible sections for the medium, the internal lights' finer
-//! settings, the external lights, the render and the view (METHOD.md §3–§7
+//! settings, the external lights, the render and the view ([method §3–§7](crate::doc::method)
 //! for what each knob means).
 //!
 //! Widgets edit the document directly; the frame loop notices the change,

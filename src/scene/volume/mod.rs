@@ -2,7 +2,7 @@
 //! Mitsuba 3 `.vol` (its `VOL` v3 binary layout), and OpenVDB `.vdb` (one
 //! float grid, read with the `vdb-rs` crate).
 //!
-//! Every loader produces a dense, cell-centred [`VoxelGrid`] (METHOD.md §1,
+//! Every loader produces a dense, cell-centred [`VoxelGrid`] ([method §1](crate::doc::method),
 //! x fastest) and treats the file as untrusted input:
 //!
 //! * sizes read from a file are multiplied with checked arithmetic and
