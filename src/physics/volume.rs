@@ -28,6 +28,7 @@ pub struct Optics {
 }
 
 /// A medium ready for tracking.
+#[derive(Clone)]
 pub struct Volume<D> {
     /// The density field.
     pub density: D,

@@ -131,6 +131,23 @@ pub enum Density {
 }
 
 impl Density {
+    /// Whether `other` is this very field: the same grid in memory, or the
+    /// same analytic shape.
+    pub fn same_field(&self, other: &Density) -> bool {
+        match (self, other) {
+            (Density::Grid(a), Density::Grid(b)) => Arc::ptr_eq(a, b),
+            (
+                Density::Sphere { center, radius },
+                Density::Sphere {
+                    center: c,
+                    radius: r,
+                },
+            ) => center == c && radius == r,
+            (Density::Box { min, max }, Density::Box { min: a, max: b }) => min == a && max == b,
+            _ => false,
+        }
+    }
+
     /// The world-space box outside which `ρ = 0`.
     pub fn bounds(&self) -> (Vec3, Vec3) {
         match self {

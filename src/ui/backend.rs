@@ -425,6 +425,10 @@ fn publish(shared: &Shared, snapshot: Snapshot) {
 struct DensityCache {
     key: Option<(DensitySource, PathBuf)>,
     density: Option<Density>,
+    /// The last job's medium, whose volume and majorants the next job
+    /// reuses when only what does not change them changed
+    /// ([`Prepared::with_scene`]).
+    prepared: Option<Arc<Prepared>>,
 }
 
 impl DensityCache {
@@ -436,6 +440,17 @@ impl DensityCache {
             self.density = Some(density);
         }
         self.density.clone().ok_or_else(|| "no density".to_string())
+    }
+
+    /// `scene`'s medium over `density` (from [`DensityCache::get`]),
+    /// reusing the last job's volume where it can, and kept for the next.
+    fn prepare(&mut self, scene: &Scene, density: &Density) -> Arc<Prepared> {
+        let prepared = Arc::new(match &self.prepared {
+            Some(last) => last.with_scene(scene.clone(), density.clone()),
+            None => Prepared::with_density(scene.clone(), density.clone()),
+        });
+        self.prepared = Some(prepared.clone());
+        prepared
     }
 }
 
@@ -496,6 +511,7 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>, gpu: Option<GpuContex
     let mut cache = DensityCache {
         key: None,
         density: None,
+        prepared: None,
     };
     let mut lights_cache = LightsCache::default();
     let mut gpu = gpu.and_then(|ctx| match DisplayPass::new(&ctx) {
@@ -513,8 +529,11 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>, gpu: Option<GpuContex
         }
     });
     // Seconds per full-resolution pixel-sample, measured per backend and
-    // estimator; guides the preview's downscale factor.
+    // estimator, of the full passes and of the previews (whose coarse
+    // lights cost several times more per sample: few lights with a wide
+    // kernel); the latter guides the preview's downscale factor.
     let mut secs_per_sample = [[2e-6f64; 2]; 2];
+    let mut preview_secs = [[2e-6f64; 2]; 2];
     let mut next: Option<Command> = None;
     loop {
         let command = match next.take() {
@@ -548,6 +567,7 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>, gpu: Option<GpuContex
             rx: &rx,
             shared: &shared,
             secs_per_sample: &mut secs_per_sample,
+            preview_secs: &mut preview_secs,
             gpu: None,
         };
         let density_key = (job.scene.medium.density.clone(), job.scene_dir.clone());
@@ -568,6 +588,8 @@ struct JobContext<'a> {
     rx: &'a Receiver<Command>,
     shared: &'a Shared,
     secs_per_sample: &'a mut [[f64; 2]; 2],
+    /// The same for the previews ([`JobContext::preview`]).
+    preview_secs: &'a mut [[f64; 2]; 2],
     /// The GPU, when this job runs there.
     gpu: Option<&'a mut GpuWorker>,
 }
@@ -638,7 +660,7 @@ impl JobContext<'_> {
         let bounds = Some(density.bounds());
         let (width, height) = (job.scene.camera.width, job.scene.camera.height);
         let t0 = Instant::now();
-        let prepared = Arc::new(Prepared::with_density(job.scene.clone(), density.clone()));
+        let prepared = cache.prepare(&job.scene, &density);
         trace("prepare", t0);
 
         // The internal lights, from the cache when only the camera changed.
@@ -653,6 +675,7 @@ impl JobContext<'_> {
         };
         let mut preview = PreviewInput {
             density: &density,
+            prepared: &prepared,
             bounds,
         };
         let lights = if !wants_internal {
@@ -670,6 +693,7 @@ impl JobContext<'_> {
             let mut coarse_settings = settings.clone();
             coarse_settings.internal.lights = settings.internal.lights.min(COARSE_LIGHTS);
             coarse_settings.internal.walks = settings.internal.walks.min(COARSE_WALKS);
+            coarse_settings.internal.view_walks = settings.internal.view_walks.min(COARSE_WALKS);
             let is_coarse = coarse_settings != settings;
             if is_coarse {
                 let t = Instant::now();
@@ -927,6 +951,8 @@ fn gpu_streams(
 /// What the low-resolution first look needs.
 struct PreviewInput<'a> {
     density: &'a Density,
+    /// The job's medium at full resolution (the preview copies its volume).
+    prepared: &'a Prepared,
     bounds: Option<(Vec3, Vec3)>,
 }
 
@@ -961,7 +987,7 @@ impl JobContext<'_> {
         let expected: f64 = job
             .estimators
             .iter()
-            .map(|&e| width as f64 * height as f64 * self.secs_per_sample[backend][e as usize])
+            .map(|&e| width as f64 * height as f64 * self.preview_secs[backend][e as usize])
             .sum();
         let factor = (expected / PREVIEW_BUDGET.as_secs_f64())
             .sqrt()
@@ -974,7 +1000,11 @@ impl JobContext<'_> {
         let mut small = job.scene.clone();
         small.camera.width = (width / factor).max(1);
         small.camera.height = (height / factor).max(1);
-        let prepared_small = Arc::new(Prepared::with_density(small.clone(), input.density.clone()));
+        let prepared_small = Arc::new(
+            input
+                .prepared
+                .with_scene(small.clone(), input.density.clone()),
+        );
         let gpu_streams = self.gpu.as_deref().map(|gpu| {
             let mut engines = gpu_engines(&gpu.ctx, job, &prepared_small, lights.as_deref())?;
             for (_, engine) in engines.iter_mut() {
@@ -1020,6 +1050,13 @@ impl JobContext<'_> {
                 streams
             }
         };
+        // What this preview cost against what was expected of it: the next
+        // preview's factor follows.
+        let predicted = expected / (factor * factor) as f64;
+        let ratio = (t.elapsed().as_secs_f64() / predicted.max(1e-9)).clamp(0.1, 10.0);
+        for &e in &job.estimators {
+            self.preview_secs[backend][e as usize] *= ratio;
+        }
         let view = lights.map(|l| Arc::new(LightsView::new(l, &job.scene)));
         self.publish(
             streams,
