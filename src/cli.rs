@@ -1160,6 +1160,8 @@ mod tests {
         run(args(&[
             "--time",
             "0.4",
+            "--method",
+            "reference",
             "--seed",
             "5",
             "--variance",

@@ -62,13 +62,15 @@
 //!
 //! The optical depth along a straight flight is integrated by the midpoint
 //! rule on a lattice anchored at the start of each flight and of each
-//! majorant cell, of step `cell` (the smallest extent of a majorant cell)
-//! in cells whose majorant optical depth across `cell` is at most a quarter
-//! of the window `s*`, and `cell / 2` in denser ones: exact for densities
-//! that are constant in each majorant cell, second-order accurate
-//! otherwise, and a step never spans more than a quarter window or half a
-//! cell (one step where cells are thin halved the clock's density lookups
-//! on the puffs, where they were four fifths of all lookups of the walks).
+//! majorant cell, of steps of at most a quarter of the window `s*` in
+//! majorant optical depth (at most [`CLOCK_MAX_STEPS`] per cell, one where
+//! the cell is thinner than that: `clock_step`), shifted by a phase
+//! hashed from the ray's direction ([`lattice_phase`]: a lattice at the
+//! same place on every ray drew rings on a homogeneous sphere), the steps
+//! that a cell's faces cut sampled so that over the phase every point of
+//! the cell weighs once (`lattice_step`): in expectation the exact
+//! optical depth, on each ray an error of at most a quarter window at an
+//! edge.
 //! The clock is that quadrature;
 //! the collisions themselves come from spectral tracking against the true
 //! `c`, so the walk stays unbiased for `L` whatever the quadrature error.

@@ -14,8 +14,11 @@
 //! only the multiply scattered part `Σ_{k≥1} J_k`, which is smooth in
 //! angle, goes through the spherical harmonics. (This is where this module
 //! goes beyond the note, which projects all of `J`: the SH order then only
-//! limits the part it represents well.) `J_i(n)` is clamped at zero, since
-//! a truncated SH series rings below zero where the function is small.
+//! limits the part it represents well.) The kernel average of the lights'
+//! `J_i(n)` is clamped at zero, since a truncated SH series rings below
+//! zero where the function is small, unless the render renews its light
+//! sets (then the passes average to the expectation over sets, which the
+//! clamp would bias: [`InternalLights::reconstruct_multi`]).
 //!
 //! The multiply scattered part is stored twice: all of it (what `L₁`
 //! scatters once more, and what the gizmos and the point form show), and

@@ -64,7 +64,10 @@ pub struct InternalSettings {
     pub walks: u32,
     /// Order of the real spherical harmonics that store `F` and `J`.
     pub sh_order: u32,
-    /// Kernel radius `h` (world units); `None`: the mean light spacing.
+    /// Kernel radius `h` (world units); `None`: 2.5 × the mean light
+    /// spacing (`physics::internal::AUTO_KERNEL_FACTOR`; with lights in
+    /// the camera's view, the median distance to a light's 64th
+    /// neighbour).
     pub kernel_radius: Option<f32>,
     /// Uniform fraction `u` of the placement density.
     pub uniform_mix: f32,
@@ -265,9 +268,11 @@ pub struct RenderSettings {
 }
 
 impl Default for RenderSettings {
+    /// The internal lights (what Lantern is for; their defaults are right
+    /// on the suite's media), 64 passes, seed 0.
     fn default() -> Self {
         Self {
-            method: Method::Reference,
+            method: Method::Internal,
             spp: 64,
             seed: 0,
             internal: InternalSettings::default(),
