@@ -8,6 +8,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use glam::Vec3;
 
+use crate::physics::environment::{EnvMap, Environment, EnvironmentKind};
 use crate::physics::gated_walk::Clock;
 use crate::physics::internal::{placement_density, InternalLights, InternalParams, L1Form};
 use crate::physics::lights::{Lights, PointLight, Sun};
@@ -16,7 +17,8 @@ use crate::physics::view_placement::ViewFrame;
 use crate::physics::volume::{DensityField, Optics, Volume};
 use crate::scene::settings::DEFAULT_S_STAR;
 use crate::scene::{
-    CameraFrame, ClockKind, Density, L1Kind, Light, RenderSettings, Scene, SceneError,
+    CameraFrame, ClockKind, Density, L1Kind, Light, LoadedSky, RenderSettings, Scene, SceneError,
+    Sky,
 };
 
 /// Majorant cells along the longest axis of the medium's box.
@@ -206,19 +208,35 @@ pub struct Prepared {
 }
 
 impl Prepared {
-    /// Loads the density (grids are read relative to `scene_dir`) and
-    /// builds the volume.
+    /// Loads the density and the environment map (both read relative to
+    /// `scene_dir`) and builds the volume.
     pub fn new(scene: Scene, scene_dir: &Path) -> Result<Self, SceneError> {
         let density = scene.load_density(scene_dir)?;
-        Ok(Self::with_density(scene, density))
+        let sky = scene.load_environment(scene_dir)?;
+        Ok(Self::with_loaded(scene, density, sky))
     }
 
     /// Builds from an already loaded density field; a medium denser than
-    /// [`MAX_DEPTH_PER_VOXEL`] is clamped (and `dense` says so).
+    /// [`MAX_DEPTH_PER_VOXEL`] is clamped (and `dense` says so). A constant
+    /// or clear sky is built here; an environment *map* is not read (use
+    /// [`Prepared::with_loaded`] with [`Scene::load_environment`]), and
+    /// without it the scene has no sky.
     pub fn with_density(scene: Scene, density: Density) -> Self {
+        let sky = match scene.environment.as_ref().map(|e| &e.sky) {
+            Some(Sky::Map { .. }) | None => None,
+            Some(_) => scene.load_environment(Path::new("")).ok().flatten(),
+        };
+        Self::with_loaded(scene, density, sky)
+    }
+
+    /// Builds from an already loaded density field and environment
+    /// ([`Scene::load_environment`]).
+    pub fn with_loaded(scene: Scene, density: Density, sky: Option<LoadedSky>) -> Self {
         let (optics, density, dense) = clamp_dense(&scene.medium, density);
         let volume = Volume::new(density, optics, MAJORANT_CELLS);
-        let lights = lights_of(&scene.lights);
+        let mut lights = lights_of(&scene.lights);
+        let background = scene.environment.as_ref().is_some_and(|e| e.background);
+        lights.environment = sky.map(|s| Arc::new(environment_of(&s, background)));
         Self {
             camera: scene.camera.frame(),
             volume,
@@ -264,6 +282,26 @@ impl Prepared {
             cancel,
         )
     }
+}
+
+/// The estimators' form of a loaded sky: the map's vertices and sampling
+/// tables ([`EnvMap`]).
+pub fn environment_of(sky: &LoadedSky, background: bool) -> Environment {
+    let kind = match sky {
+        LoadedSky::Constant(l) => EnvironmentKind::Constant(*l),
+        LoadedSky::Map {
+            map,
+            rotation_deg,
+            scale,
+        } => EnvironmentKind::Map(EnvMap::new(
+            map.width,
+            map.height,
+            &map.texels,
+            *rotation_deg,
+            *scale,
+        )),
+    };
+    Environment { kind, background }
 }
 
 /// Converts scene lights to the estimators' form (unit directions).
