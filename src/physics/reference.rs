@@ -95,7 +95,7 @@ pub fn environment_source<D: DensityField>(
     } else {
         phase
     };
-    if !(pdf > 0.0) {
+    if pdf.is_nan() || pdf <= 0.0 {
         return Vec3::ZERO;
     }
     let radiance = env.radiance(from);
