@@ -425,6 +425,9 @@ fn publish(shared: &Shared, snapshot: Snapshot) {
 struct DensityCache {
     key: Option<(DensitySource, PathBuf)>,
     density: Option<Density>,
+    /// The sky of the last scene (a map is read, a clear sky baked, once).
+    sky_key: Option<(Option<crate::scene::Environment>, Option<[u32; 3]>, PathBuf)>,
+    sky: Option<crate::scene::LoadedSky>,
 }
 
 impl DensityCache {
@@ -436,6 +439,21 @@ impl DensityCache {
             self.density = Some(density);
         }
         self.density.clone().ok_or_else(|| "no density".to_string())
+    }
+
+    /// The scene's sky, loaded (`None` without one).
+    fn sky(
+        &mut self,
+        scene: &Scene,
+        dir: &Path,
+    ) -> Result<Option<crate::scene::LoadedSky>, String> {
+        let sun = scene.first_sun().map(|d| d.to_array().map(f32::to_bits));
+        let key = (scene.environment.clone(), sun, dir.to_path_buf());
+        if self.sky_key.as_ref() != Some(&key) {
+            self.sky = scene.load_environment(dir).map_err(|e| format!("{e:#}"))?;
+            self.sky_key = Some(key);
+        }
+        Ok(self.sky.clone())
     }
 }
 
@@ -496,6 +514,8 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>, gpu: Option<GpuContex
     let mut cache = DensityCache {
         key: None,
         density: None,
+        sky_key: None,
+        sky: None,
     };
     let mut lights_cache = LightsCache::default();
     let mut gpu = gpu.and_then(|ctx| match DisplayPass::new(&ctx) {
@@ -632,13 +652,24 @@ impl JobContext<'_> {
                 return self.next_command();
             }
         };
+        let sky = match cache.sky(&job.scene, &job.scene_dir) {
+            Ok(s) => s,
+            Err(e) => {
+                push_error(self.shared, e);
+                return self.next_command();
+            }
+        };
         if let Some(c) = self.newer() {
             return Some(c);
         }
         let bounds = Some(density.bounds());
         let (width, height) = (job.scene.camera.width, job.scene.camera.height);
         let t0 = Instant::now();
-        let prepared = Arc::new(Prepared::with_density(job.scene.clone(), density.clone()));
+        let prepared = Arc::new(Prepared::with_loaded(
+            job.scene.clone(),
+            density.clone(),
+            sky.clone(),
+        ));
         trace("prepare", t0);
 
         // The internal lights, from the cache when only the camera changed.
@@ -653,6 +684,7 @@ impl JobContext<'_> {
         };
         let mut preview = PreviewInput {
             density: &density,
+            sky: &sky,
             bounds,
         };
         let lights = if !wants_internal {
@@ -927,6 +959,7 @@ fn gpu_streams(
 /// What the low-resolution first look needs.
 struct PreviewInput<'a> {
     density: &'a Density,
+    sky: &'a Option<crate::scene::LoadedSky>,
     bounds: Option<(Vec3, Vec3)>,
 }
 
@@ -974,7 +1007,11 @@ impl JobContext<'_> {
         let mut small = job.scene.clone();
         small.camera.width = (width / factor).max(1);
         small.camera.height = (height / factor).max(1);
-        let prepared_small = Arc::new(Prepared::with_density(small.clone(), input.density.clone()));
+        let prepared_small = Arc::new(Prepared::with_loaded(
+            small.clone(),
+            input.density.clone(),
+            input.sky.clone(),
+        ));
         let gpu_streams = self.gpu.as_deref().map(|gpu| {
             let mut engines = gpu_engines(&gpu.ctx, job, &prepared_small, lights.as_deref())?;
             for (_, engine) in engines.iter_mut() {
