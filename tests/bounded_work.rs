@@ -107,6 +107,7 @@ fn far_point_lights_deliver_their_inverse_square_irradiance() {
                 position: Vec3::new(x, x * 0.5, 0.0),
                 intensity: Vec3::splat(1e38),
             }],
+            environment: None,
         };
         let p = Vec3::new(0.1, 0.2, 0.3);
         let mut samples = Vec::new();

@@ -78,6 +78,7 @@ fn single_scatter_matches_quadrature() {
             position: point_pos,
             intensity: Vec3::splat(point_i as f32),
         }],
+        environment: None,
     };
     // Camera ray off-centre so that the geometry is not symmetric.
     let origin = Vec3::new(0.2, 0.3, 3.0);
@@ -164,6 +165,7 @@ fn albedo_one_conserves_energy() {
                 irradiance: Vec3::splat(e),
             }],
             points: vec![],
+            environment: None,
         };
         let rb = 1.05f32;
         let area = 4.0 * std::f32::consts::PI * rb * rb;

@@ -191,12 +191,18 @@ fn single_beyond_window(
 // `samples` stratified points and internal-light samples (`gather`).
 fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rng>) -> GatherSample {
     var out = GatherSample(vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    let sky = env_background(dir);
     let clip = medium_clip(eye, dir);
     if !clip.hit {
+        out.single = sky;
         return out;
     }
     let x = eye + dir * clip.t0;
     let len = clip.t1 - clip.t0;
+    if any(sky != vec3<f32>(0.0)) {
+        // The sky behind the medium, through all of it.
+        out.single = sky * transmittance_at_rate(x, dir, len, TRACKING_RATE, rng);
+    }
     let s_star = gather_params.s_star;
     let clock = gather_params.clock;
     // The window's end along the ray.

@@ -31,7 +31,43 @@ fn single_scatter_source_at_rate(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr
         let tr = transmittance_at_rate(p, -l.travel, l.distance, rate, rng);
         sum += l.irradiance * tr * phase;
     }
+    if env_present() {
+        sum += environment_source(p, n, rate, rng);
+    }
     return sum;
+}
+
+// The environment's part of `S₁(p, n) / b(p)` by one-sample MIS between the
+// map and the phase function (`environment_source`).
+fn environment_source(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, Rng>) -> vec3<f32> {
+    let g = scene.medium.g;
+    let q = scene.env_share;
+    let u0 = rng_next_f32(rng);
+    let u1 = rng_next_f32(rng);
+    let u2 = rng_next_f32(rng);
+    var towards: vec3<f32>;
+    if u0 < q {
+        let s = env_sample(u1, u2);
+        if s.pdf <= 0.0 {
+            return vec3<f32>(0.0);
+        }
+        towards = s.towards;
+    } else {
+        towards = -sample_hg(g, n, u1, u2);
+    }
+    let phase = hg(g, -dot(towards, n));
+    var pdf = phase;
+    if q > 0.0 {
+        pdf = q * env_pdf(towards) + (1.0 - q) * phase;
+    }
+    if !(pdf > 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let radiance = env_radiance(towards);
+    if all(radiance == vec3<f32>(0.0)) {
+        return vec3<f32>(0.0);
+    }
+    return radiance * (phase / pdf) * transmittance_at_rate(p, towards, BIG, rate, rng);
 }
 
 // A radiance estimate and its single-scattering part.
@@ -54,14 +90,23 @@ fn radiance_split(origin: vec3<f32>, dir: vec3<f32>, max_collisions: u32, rng: p
     var depth = 0u;
     loop {
         let clip = medium_clip(o, d);
-        if !clip.hit {
+        var escaped = !clip.hit;
+        var t = 0.0;
+        if clip.hit {
+            let flight = free_flight(o, d, clip.t0, clip.t1, &weight, rng);
+            escaped = !flight.hit;
+            t = flight.t;
+        }
+        if escaped {
+            if depth == 0u {
+                // The camera ray left unscattered.
+                single = weight * env_background(d);
+                radiance += single;
+            }
             break;
         }
-        let flight = free_flight(o, d, clip.t0, clip.t1, &weight, rng);
-        if !flight.hit {
-            break;
-        }
-        let p = o + d * flight.t;
+        let flight_t = t;
+        let p = o + d * flight_t;
         weight *= albedo;
         let contribution = weight * single_scatter_source(p, -d, rng);
         radiance += contribution;

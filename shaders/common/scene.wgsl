@@ -1,4 +1,5 @@
-// The data every estimator reads, and its bindings (group 0, bindings 0–4).
+// The data every estimator reads, and its bindings (group 0, bindings 0–4
+// and 9).
 // Keep in sync with src/gpu/mirrors.rs: each struct here has a
 // `#[repr(C)]` twin there with the same field order and size.
 
@@ -49,8 +50,22 @@ struct Scene {
     // Suns come first in `lights`, then points (the CPU's order).
     sun_count: u32,
     point_count: u32,
-    _pad0: u32,
-    _pad1: u32,
+    // The environment (`GpuScene` in src/gpu/mirrors.rs, `Environment` in
+    // src/physics/environment.rs): ENV_NONE, ENV_CONSTANT or ENV_MAP.
+    env_kind: u32,
+    env_background: u32,
+    env_radiance: vec3<f32>,
+    env_share: f32,
+    env_width: u32,
+    env_height: u32,
+    env_cos: f32,
+    env_sin: f32,
+    env_inv_total: f32,
+    // Offsets in `env_data` of the cells' weights, the rows' table and the
+    // per-row tables (the vertices start at 0).
+    env_cells: u32,
+    env_rows: u32,
+    env_cols: u32,
 }
 
 // What changes from pass to pass.
@@ -76,6 +91,9 @@ const DENSITY_BOX: u32 = 1u;
 const DENSITY_GRID: u32 = 2u;
 const LIGHT_SUN: u32 = 0u;
 const LIGHT_POINT: u32 = 1u;
+const ENV_NONE: u32 = 0u;
+const ENV_CONSTANT: u32 = 1u;
+const ENV_MAP: u32 = 2u;
 
 @group(0) @binding(0) var<uniform> scene: Scene;
 @group(0) @binding(1) var<uniform> pass_params: PassParams;
@@ -88,3 +106,6 @@ const LIGHT_POINT: u32 = 1u;
 @group(0) @binding(3) var<storage, read> majorant_values: array<f32>;
 // External lights (at least one element; counts in `scene`).
 @group(0) @binding(4) var<storage, read> lights: array<Light>;
+// The environment map's vertices and sampling tables (`gpu_environment`;
+// one unused zero without a map).
+@group(0) @binding(9) var<storage, read> env_data: array<f32>;

@@ -33,10 +33,11 @@ struct PlacementParams {
 @compute @workgroup_size(64, 1, 1)
 fn place_lights(@builtin(global_invocation_id) id: vec3<u32>) {
     // The scene's bindings are shared by every pipeline (one bind group
-    // for all, built by the renderer); these two are otherwise unused here
+    // for all, built by the renderer); these three are otherwise unused here
     // and would drop out of the layout derived from the shader.
     _ = majorant_values[0];
     _ = lights[0];
+    _ = env_data[0];
     let i = id.x;
     if i >= placement_params.light_count {
         return;

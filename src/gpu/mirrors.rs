@@ -7,11 +7,14 @@
 //!
 //! The conversions from the prepared scene live here too, so that what the
 //! GPU sees is defined in one place ([method §1](crate::doc::method): the medium, its box and
-//! majorants, the external lights).
+//! majorants, the external lights, the environment).
 
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
+#[cfg(doc)]
+use crate::physics::environment::Environment;
+use crate::physics::environment::{EnvMap, EnvironmentKind};
 use crate::physics::lights::Lights;
 use crate::physics::majorant::MajorantGrid;
 use crate::render::SceneVolume;
@@ -114,12 +117,39 @@ pub struct GpuScene {
     pub sun_count: u32,
     /// Number of point lights (after the suns).
     pub point_count: u32,
-    /// Padding.
-    pub _pad0: u32,
-    /// Padding.
-    pub _pad1: u32,
+    /// The environment: [`ENV_NONE`], [`ENV_CONSTANT`] or [`ENV_MAP`].
+    pub env_kind: u32,
+    /// 1 if the camera sees the sky behind the medium.
+    pub env_background: u32,
+    /// A constant sky's radiance.
+    pub env_radiance: [f32; 3],
+    /// [`Environment::map_share`].
+    pub env_share: f32,
+    /// A map's width `W`.
+    pub env_width: u32,
+    /// A map's height `H`.
+    pub env_height: u32,
+    /// `cos` of the map's rotation about +y.
+    pub env_cos: f32,
+    /// `sin` of the map's rotation about +y.
+    pub env_sin: f32,
+    /// [`EnvMap::inv_total`].
+    pub env_inv_total: f32,
+    /// Offset in `env_data` of the cells' weights (the vertices start at 0).
+    pub env_cells: u32,
+    /// Offset in `env_data` of the rows' cumulative table.
+    pub env_rows: u32,
+    /// Offset in `env_data` of the per-row cumulative tables.
+    pub env_cols: u32,
 }
-const _: () = assert!(std::mem::size_of::<GpuScene>() == 240);
+const _: () = assert!(std::mem::size_of::<GpuScene>() == 288);
+
+/// No environment.
+pub const ENV_NONE: u32 = 0;
+/// A constant sky.
+pub const ENV_CONSTANT: u32 = 1;
+/// A latitude–longitude map.
+pub const ENV_MAP: u32 = 2;
 
 /// What changes from pass to pass (a uniform buffer). Keep in sync with
 /// `PassParams` in `shaders/common/scene.wgsl`.
@@ -433,13 +463,67 @@ pub fn gpu_lights(lights: &Lights) -> Vec<GpuLight> {
 impl GpuScene {
     /// The constant data of a render.
     pub fn new(camera: &CameraFrame, volume: &SceneVolume, lights: &Lights) -> Self {
-        Self {
+        let mut out = Self {
             camera: GpuCamera::new(camera),
             medium: GpuMedium::new(volume),
             sun_count: lights.suns.len() as u32,
             point_count: lights.points.len() as u32,
             ..Self::default()
+        };
+        if let Some(env) = lights.sky() {
+            out.env_background = env.background as u32;
+            out.env_share = env.map_share();
+            match &env.kind {
+                EnvironmentKind::Constant(l) => {
+                    out.env_kind = ENV_CONSTANT;
+                    out.env_radiance = l.to_array();
+                }
+                EnvironmentKind::Map(m) => {
+                    let (vertices, cells, rows) = env_offsets(m);
+                    out.env_kind = ENV_MAP;
+                    out.env_width = m.width;
+                    out.env_height = m.height;
+                    (out.env_cos, out.env_sin) = m.rotation;
+                    out.env_inv_total = m.inv_total;
+                    out.env_cells = vertices;
+                    out.env_rows = cells;
+                    out.env_cols = rows;
+                }
+            }
         }
+        out
+    }
+}
+
+/// Where the parts of a map start in [`gpu_environment`]'s buffer: the
+/// cells' weights, the rows' table and the per-row tables (the vertices
+/// start at 0).
+fn env_offsets(m: &EnvMap) -> (u32, u32, u32) {
+    let vertices = m.vertices.len() as u32 * 3;
+    let cells = vertices + m.cell_weight.len() as u32;
+    let rows = cells + m.row_cdf.len() as u32;
+    (vertices, cells, rows)
+}
+
+/// The environment map and its sampling tables as the GPU reads them
+/// (`env_data`, binding 9): the vertices (3 floats each, row-major), the
+/// cells' weights, the rows' cumulative table, the per-row cumulative
+/// tables ([`EnvMap`]); one unused zero without a map (a binding cannot be
+/// empty).
+pub fn gpu_environment(lights: &Lights) -> Vec<f32> {
+    match lights.sky().map(|e| &e.kind) {
+        Some(EnvironmentKind::Map(m)) => {
+            let mut out = Vec::with_capacity(
+                m.vertices.len() * 3 + m.cell_weight.len() * 2 + m.row_cdf.len(),
+            );
+            out.extend(m.vertices.iter().flat_map(|v| v.to_array()));
+            out.extend_from_slice(&m.cell_weight);
+            out.extend_from_slice(&m.row_cdf);
+            out.extend_from_slice(&m.col_cdf);
+            debug_assert_eq!(out.len() as u32, env_offsets(m).2 + m.col_cdf.len() as u32);
+            out
+        }
+        _ => vec![0.0],
     }
 }
 
@@ -470,6 +554,8 @@ mod tests {
     fn offsets_follow_wgsl_layout() {
         assert_eq!(std::mem::offset_of!(GpuScene, medium), 64);
         assert_eq!(std::mem::offset_of!(GpuScene, sun_count), 224);
+        assert_eq!(std::mem::offset_of!(GpuScene, env_radiance), 240);
+        assert_eq!(std::mem::offset_of!(GpuScene, env_width), 256);
         assert_eq!(std::mem::offset_of!(GpuMedium, g), 28);
         assert_eq!(std::mem::offset_of!(GpuMedium, grid_dims), 96);
         assert_eq!(std::mem::offset_of!(GpuMedium, majorant_max), 144);

@@ -15,7 +15,9 @@ use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use super::context::{GpuContext, GpuError};
-use super::mirrors::{density_voxels, gpu_lights, GpuAccum, GpuPassParams, GpuScene};
+use super::mirrors::{
+    density_voxels, gpu_environment, gpu_lights, GpuAccum, GpuPassParams, GpuScene,
+};
 use super::shaders::{ModuleSource, REFERENCE_MODULE};
 use crate::render::{Film, Prepared};
 
@@ -72,7 +74,8 @@ pub(crate) fn storage_buffer(
         }))
 }
 
-/// The scene's constant buffers (bindings 0–4 of `shaders/common/scene.wgsl`).
+/// The scene's constant buffers (bindings 0–4 and 9 of
+/// `shaders/common/scene.wgsl`).
 pub(crate) struct SceneBuffers {
     /// `Scene` uniform.
     pub scene: wgpu::Buffer,
@@ -85,6 +88,8 @@ pub(crate) struct SceneBuffers {
     pub majorants: wgpu::Buffer,
     /// External lights.
     pub lights: wgpu::Buffer,
+    /// The environment map and its sampling tables (binding 9).
+    pub environment: wgpu::Buffer,
     /// Bytes held on the GPU by these buffers.
     pub bytes: u64,
 }
@@ -111,6 +116,13 @@ impl SceneBuffers {
             bytemuck::cast_slice(&lights),
             wgpu::BufferUsages::empty(),
         )?;
+        let env = gpu_environment(&prepared.lights);
+        let environment = storage_buffer(
+            ctx,
+            "environment map",
+            bytemuck::cast_slice(&env),
+            wgpu::BufferUsages::empty(),
+        )?;
         let scene = ctx
             .device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -125,20 +137,25 @@ impl SceneBuffers {
                 contents: bytemuck::bytes_of(&GpuPassParams::default()),
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             });
-        let bytes =
-            density_bytes + majorants.size() + lights_buf.size() + scene.size() + pass.size();
+        let bytes = density_bytes
+            + majorants.size()
+            + lights_buf.size()
+            + environment.size()
+            + scene.size()
+            + pass.size();
         Ok(Self {
             scene,
             pass,
             density_view,
             majorants,
             lights: lights_buf,
+            environment,
             bytes,
         })
     }
 
-    /// Bind-group entries 0–4.
-    pub fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 5] {
+    /// Bind-group entries 0–4 and 9.
+    pub fn entries(&self) -> [wgpu::BindGroupEntry<'_>; 6] {
         [
             buffer(0, &self.scene),
             buffer(1, &self.pass),
@@ -148,6 +165,7 @@ impl SceneBuffers {
             },
             buffer(3, &self.majorants),
             buffer(4, &self.lights),
+            buffer(9, &self.environment),
         ]
     }
 }

@@ -1442,6 +1442,7 @@ mod tests {
                 irradiance: Vec3::new(3.0, 2.0, 1.0),
             }],
             points: Vec::new(),
+            environment: None,
         };
         let settings = GateSettings {
             s_star: 0.5,

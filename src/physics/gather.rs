@@ -68,7 +68,7 @@ use super::gated_walk::{
 use super::internal::{InternalLights, L1Form, Part};
 use super::lights::Lights;
 use super::phase;
-use super::reference::single_scatter_source_at_rate;
+use super::reference::{background, single_scatter_source_at_rate};
 use super::rng::Rng;
 use super::segment_pdf::SegmentPdf;
 use super::tracking::transmittance_at_rate;
@@ -95,7 +95,8 @@ pub const MAX_GATHER_POINTS: usize = 256;
 /// One gather estimate, by part.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GatherSample {
-    /// `L₀`'s `k = 0` part: single scatter inside the window.
+    /// `L₀`'s `k = 0` part: single scatter inside the window (and, when the
+    /// sky is drawn as the background, the sky seen through the medium).
     pub single: Vec3,
     /// `L₀`'s `k ≥ 1` part: the reconstructed `J` along the ray.
     pub reconstructed: Vec3,
@@ -213,11 +214,17 @@ pub fn gather<D: DensityField>(
     rng: &mut Rng,
 ) -> GatherSample {
     let mut out = GatherSample::default();
+    let sky = background(lights, dir);
     let Some((t_in, t_out)) = vol.clip(eye, dir) else {
+        out.single = sky;
         return out;
     };
     let x = eye + dir * t_in;
     let len = t_out - t_in;
+    if sky != Vec3::ZERO {
+        // The sky behind the medium, through all of it.
+        out.single = sky * transmittance_at_rate(vol, x, dir, len, TRACKING_RATE, rng);
+    }
     let s_star = cache.s_star;
     let clock = cache.params.clock;
     // The window's end along the ray.
@@ -732,6 +739,7 @@ mod tests {
                 irradiance: Vec3::new(1.0, 2.0, 3.0),
             }],
             points: Vec::new(),
+            environment: None,
         };
         let eye = Vec3::new(0.4, 0.3, 4.0);
         let params = InternalParams {
@@ -1123,6 +1131,7 @@ mod tests {
                 irradiance: e_sun,
             }],
             points: Vec::new(),
+            environment: None,
         };
         let (y0, z0) = (0.2f32, -0.1f32);
         let eye = Vec3::new(-3.0, y0, z0);

@@ -1,7 +1,12 @@
 //! External lights in the form the estimators use ([method §1](crate::doc::method)): unit
-//! directions, and the first-scatter source `S₁` they produce at a point.
+//! directions, and the first-scatter source `S₁` they produce at a point;
+//! the environment, if any, rides along ([`super::environment`]).
+
+use std::sync::Arc;
 
 use glam::Vec3;
+
+use super::environment::Environment;
 
 /// A directional light at infinity.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -28,6 +33,10 @@ pub struct Lights {
     pub suns: Vec<Sun>,
     /// Point lights.
     pub points: Vec<PointLight>,
+    /// The sky, if the scene has one. [`Lights::for_each_at`] does not
+    /// visit it (it is no single direction); the first-scatter source adds
+    /// it ([`super::reference::single_scatter_source`]).
+    pub environment: Option<Arc<Environment>>,
 }
 
 /// The light arriving at a point from one external light, before
@@ -95,8 +104,17 @@ impl Lights {
         }
     }
 
-    /// Whether there is no light at all.
+    /// Whether there is no light at all (no sun, no point light, no sky
+    /// that is not black).
     pub fn is_empty(&self) -> bool {
-        self.suns.is_empty() && self.points.is_empty()
+        self.suns.is_empty()
+            && self.points.is_empty()
+            && self.environment.as_ref().is_none_or(|e| e.is_black())
+    }
+
+    /// The environment, unless there is none or it is black.
+    #[inline]
+    pub fn sky(&self) -> Option<&Environment> {
+        self.environment.as_deref().filter(|e| !e.is_black())
     }
 }

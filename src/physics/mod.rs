@@ -7,6 +7,7 @@
 //! [`volume::DensityField`]; the renderers in `cpu/` (and the WGSL mirrors in
 //! `shaders/`) call these functions per sample.
 
+pub mod environment;
 pub mod frame;
 pub mod gated_walk;
 pub mod gather;

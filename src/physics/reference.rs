@@ -1,6 +1,7 @@
 //! The unbiased reference estimator ([method §2](crate::doc::method)): a volumetric path tracer
 //! with spectral tracking for free flights, ratio tracking for shadow rays,
-//! next-event estimation to every light, and Russian roulette.
+//! next-event estimation to every light (the environment included), and
+//! Russian roulette.
 //!
 //! Paths are traced backwards from the camera. At a real collision the path
 //! arriving along `dir` receives light scattered into `−dir`; the phase
@@ -8,6 +9,7 @@
 
 use glam::Vec3;
 
+use super::environment::Environment;
 use super::lights::Lights;
 use super::phase;
 use super::rng::Rng;
@@ -20,7 +22,10 @@ pub const RR_START_DEPTH: u32 = 3;
 /// In-scattered first-scatter radiance per unit scattering coefficient at
 /// `p` towards direction `n` (the direction the light travels after
 /// scattering): `S₁(p, n) / b(p) = Σ_lights P(n·ω) T(light, p) E`, with
-/// the transmittance estimated by ratio tracking.
+/// the transmittance estimated by ratio tracking, plus the environment's
+/// `∫ P(n·ω) L(−ω) T dω` by one sample ([`environment_source`]). Every
+/// estimator's `S₁` comes from here: the reference's next-event
+/// estimation, the walks' gates and the gather's marches.
 #[inline]
 pub fn single_scatter_source<D: DensityField>(
     vol: &Volume<D>,
@@ -49,7 +54,66 @@ pub fn single_scatter_source_at_rate<D: DensityField>(
         let tr = transmittance_at_rate(vol, p, -l.travel, l.distance, rate, rng);
         sum += l.irradiance * tr * phase;
     });
+    if let Some(env) = lights.sky() {
+        sum += environment_source(vol, env, p, n, rate, rng);
+    }
     sum
+}
+
+/// One estimate of the environment's part of `S₁(p, n) / b(p)`,
+/// `∫ P(n·ω) L(−ω) T(p, ∞ along −ω) dω` over the directions `ω` light
+/// travels: a direction from the environment with probability
+/// [`Environment::map_share`] `q`, from the phase function otherwise, and
+/// `P L T / (q p_env + (1 − q) P)` (one-sample MIS with the balance
+/// heuristic), the transmittance ratio-tracked at `rate` times the
+/// majorant. Draws three numbers from `rng` before tracking.
+#[inline]
+pub fn environment_source<D: DensityField>(
+    vol: &Volume<D>,
+    env: &Environment,
+    p: Vec3,
+    n: Vec3,
+    rate: f32,
+    rng: &mut Rng,
+) -> Vec3 {
+    let g = vol.optics.g;
+    let q = env.map_share();
+    let (u0, u1, u2) = (rng.next_f32(), rng.next_f32(), rng.next_f32());
+    let from = if u0 < q {
+        match env.sample(u1, u2) {
+            Some((d, _)) => d,
+            None => return Vec3::ZERO,
+        }
+    } else {
+        // Light travelling along `t` scatters into `n` with density
+        // `P(n·t)`: draw `t` about `n`; it comes from `−t`.
+        -phase::sample_hg(g, n, u1, u2)
+    };
+    let phase = phase::hg(g, -from.dot(n));
+    let pdf = if q > 0.0 {
+        q * env.pdf(from) + (1.0 - q) * phase
+    } else {
+        phase
+    };
+    if pdf.is_nan() || pdf <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let radiance = env.radiance(from);
+    if radiance == Vec3::ZERO {
+        return Vec3::ZERO;
+    }
+    radiance * (phase / pdf) * transmittance_at_rate(vol, p, from, f32::INFINITY, rate, rng)
+}
+
+/// The sky seen behind the medium by a ray travelling along `dir`, with
+/// its transmittance (the caller's), when the environment is drawn as the
+/// background; zero otherwise.
+#[inline]
+pub fn background(lights: &Lights, dir: Vec3) -> Vec3 {
+    match lights.sky() {
+        Some(env) if env.background => env.radiance(dir),
+        _ => Vec3::ZERO,
+    }
 }
 
 /// One path-traced estimate of the radiance arriving at `origin` from
@@ -68,7 +132,12 @@ pub fn radiance<D: DensityField>(
 }
 
 /// [`radiance`] and, second, its single-scattering part (the light
-/// scattered at the first collision only).
+/// scattered at the first collision only, plus the background the camera
+/// ray sees through the medium when the sky is drawn). Paths that leave
+/// the medium after a collision add nothing: next-event estimation at
+/// every collision already counts all the light that arrives there from
+/// the sky unscattered (the phase-sampled half of its MIS is the path's
+/// own continuation, drawn again).
 pub fn radiance_split<D: DensityField>(
     vol: &Volume<D>,
     lights: &Lights,
@@ -83,8 +152,16 @@ pub fn radiance_split<D: DensityField>(
     let mut o = origin;
     let mut d = dir;
     let mut depth = 0u32;
-    while let Some((t0, t1)) = vol.clip(o, d) {
-        let Some(t) = free_flight(vol, o, d, t0, t1, &mut weight, rng) else {
+    loop {
+        let flight = vol
+            .clip(o, d)
+            .and_then(|(t0, t1)| free_flight(vol, o, d, t0, t1, &mut weight, rng));
+        let Some(t) = flight else {
+            if depth == 0 {
+                // The camera ray left unscattered.
+                single = weight * background(lights, d);
+                radiance += single;
+            }
             break;
         };
         let p = o + d * t;

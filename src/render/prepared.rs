@@ -8,6 +8,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 
 use glam::Vec3;
 
+use crate::physics::environment::{EnvMap, Environment, EnvironmentKind};
 use crate::physics::gated_walk::Clock;
 use crate::physics::internal::{placement_density, InternalLights, InternalParams, L1Form};
 use crate::physics::lights::{Lights, PointLight, Sun};
@@ -16,7 +17,8 @@ use crate::physics::view_placement::ViewFrame;
 use crate::physics::volume::{DensityField, Optics, Volume};
 use crate::scene::settings::DEFAULT_S_STAR;
 use crate::scene::{
-    CameraFrame, ClockKind, Density, L1Kind, Light, RenderSettings, Scene, SceneError,
+    CameraFrame, ClockKind, Density, L1Kind, Light, LoadedSky, RenderSettings, Scene, SceneError,
+    Sky,
 };
 
 /// Majorant cells along the longest axis of the medium's box.
@@ -209,20 +211,36 @@ pub struct Prepared {
 }
 
 impl Prepared {
-    /// Loads the density (grids are read relative to `scene_dir`) and
-    /// builds the volume.
+    /// Loads the density and the environment map (both read relative to
+    /// `scene_dir`) and builds the volume.
     pub fn new(scene: Scene, scene_dir: &Path) -> Result<Self, SceneError> {
         let density = scene.load_density(scene_dir)?;
-        Ok(Self::with_density(scene, density))
+        let sky = scene.load_environment(scene_dir)?;
+        Ok(Self::with_loaded(scene, density, sky))
     }
 
     /// Builds from an already loaded density field; a medium denser than
-    /// [`MAX_DEPTH_PER_VOXEL`] is clamped (and `dense` says so).
+    /// [`MAX_DEPTH_PER_VOXEL`] is clamped (and `dense` says so). A constant
+    /// or clear sky is built here; an environment *map* is not read (use
+    /// [`Prepared::with_loaded`] with [`Scene::load_environment`]), and
+    /// without it the scene has no sky.
     pub fn with_density(scene: Scene, density: Density) -> Self {
+        let sky = match scene.environment.as_ref().map(|e| &e.sky) {
+            Some(Sky::Map { .. }) | None => None,
+            Some(_) => scene.load_environment(Path::new("")).ok().flatten(),
+        };
+        Self::with_loaded(scene, density, sky)
+    }
+
+    /// Builds from an already loaded density field and environment
+    /// ([`Scene::load_environment`]).
+    pub fn with_loaded(scene: Scene, density: Density, sky: Option<LoadedSky>) -> Self {
         let given = density.clone();
         let (optics, density, dense) = clamp_dense(&scene.medium, density);
         let volume = Volume::new(density, optics, MAJORANT_CELLS);
-        let lights = lights_of(&scene.lights);
+        let mut lights = lights_of(&scene.lights);
+        let background = scene.environment.as_ref().is_some_and(|e| e.background);
+        lights.environment = sky.map(|s| Arc::new(environment_of(&s, background)));
         Self {
             camera: scene.camera.frame(),
             volume,
@@ -234,30 +252,42 @@ impl Prepared {
         }
     }
 
-    /// This scene's medium for `scene` over `density`, without building it
-    /// again when the two media share their density field (the same grid in
-    /// memory, or the same shape) and extinction (the previewer's
-    /// edits of the camera, the lights, the albedo, `g` or the method's
-    /// settings, and its reduced-resolution previews): the volume and its
-    /// majorant grid are copied, the placement density's cache shared, and
+    /// This scene's medium for `scene` over `density` and `sky` (as
+    /// [`Prepared::with_loaded`]), without building it again when the two
+    /// media share their density field (the same grid in memory, or the
+    /// same shape) and extinction (the previewer's edits of the camera,
+    /// the lights, the albedo, `g` or the method's settings, and its
+    /// reduced-resolution previews): the volume and its majorant grid are
+    /// copied, the placement density's cache shared, the sky's sampling
+    /// tables too while the sky and the sun it may follow are the same, and
     /// only the albedo, `g`, the camera and the lights taken from `scene`.
-    /// Otherwise [`Prepared::with_density`] over `density`. On the cloud
-    /// at 512² a rebuild took 22–34 ms of the previewer's latency.
-    pub fn with_scene(&self, scene: Scene, density: Density) -> Self {
+    /// On the cloud at 512² a rebuild took 22–34 ms of the previewer's
+    /// latency.
+    pub fn with_scene(&self, scene: Scene, density: Density, sky: &Option<LoadedSky>) -> Self {
         let (a, b) = (&self.scene.medium, &scene.medium);
         let same_medium = self.given.same_field(&density)
             && a.density_scale.to_bits() == b.density_scale.to_bits()
             && a.sigma_t.to_array().map(f32::to_bits) == b.sigma_t.to_array().map(f32::to_bits);
         if !same_medium {
-            return Self::with_density(scene, density);
+            return Self::with_loaded(scene, density, sky.clone());
         }
         let mut volume = self.volume.clone();
         volume.optics.albedo = scene.medium.albedo;
         volume.optics.g = scene.medium.g;
+        let mut lights = lights_of(&scene.lights);
+        lights.environment = if self.scene.environment == scene.environment
+            && self.scene.first_sun() == scene.first_sun()
+        {
+            self.lights.environment.clone()
+        } else {
+            let background = scene.environment.as_ref().is_some_and(|e| e.background);
+            sky.as_ref()
+                .map(|s| Arc::new(environment_of(s, background)))
+        };
         Self {
             camera: scene.camera.frame(),
             volume,
-            lights: lights_of(&scene.lights),
+            lights,
             dense: self.dense,
             placement: self.placement.clone(),
             given: density,
@@ -305,6 +335,26 @@ impl Prepared {
 /// The placement density built for one `u_mix` (its bits), shared by the
 /// [`Prepared`] of one medium.
 type PlacementCache = Mutex<Option<(u32, Arc<PlacementDensity>)>>;
+
+/// The estimators' form of a loaded sky: the map's vertices and sampling
+/// tables ([`EnvMap`]).
+pub fn environment_of(sky: &LoadedSky, background: bool) -> Environment {
+    let kind = match sky {
+        LoadedSky::Constant(l) => EnvironmentKind::Constant(*l),
+        LoadedSky::Map {
+            map,
+            rotation_deg,
+            scale,
+        } => EnvironmentKind::Map(EnvMap::new(
+            map.width,
+            map.height,
+            &map.texels,
+            *rotation_deg,
+            *scale,
+        )),
+    };
+    Environment { kind, background }
+}
 
 /// Converts scene lights to the estimators' form (unit directions).
 pub fn lights_of(lights: &[Light]) -> Lights {

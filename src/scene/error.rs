@@ -48,6 +48,16 @@ pub enum SceneError {
         /// What is wrong with it.
         reason: String,
     },
+    /// An environment map is unusable: unreadable or truncated, not a
+    /// latitude–longitude map, or with texels that are not finite and
+    /// non-negative.
+    #[error("environment map {path}: {reason}")]
+    Environment {
+        /// The map file.
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
     /// The scene could not be written.
     #[error("cannot write {path}: {reason}")]
     Write {
@@ -67,6 +77,14 @@ impl SceneError {
         Self::Invalid {
             path: path.into(),
             field: field.to_owned(),
+            reason: reason.into(),
+        }
+    }
+
+    /// Shorthand for [`SceneError::Environment`].
+    pub fn environment(path: impl Into<PathBuf>, reason: impl Into<String>) -> Self {
+        Self::Environment {
+            path: path.into(),
             reason: reason.into(),
         }
     }

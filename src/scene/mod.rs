@@ -8,6 +8,7 @@
 
 pub mod camera;
 pub mod cloud;
+pub mod environment;
 pub mod error;
 pub mod grid;
 pub mod light;
@@ -22,6 +23,7 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 pub use camera::{Camera, CameraFrame};
+pub use environment::{Environment, LoadedSky, Sky, SkyMap};
 pub use error::SceneError;
 pub use grid::VoxelGrid;
 pub use light::Light;
@@ -89,6 +91,10 @@ pub struct Scene {
     pub medium: Medium,
     /// External lights.
     pub lights: Vec<Light>,
+    /// The sky, if any: at most one environment per scene. Scenes written
+    /// before environments existed have none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub environment: Option<Environment>,
     /// Render settings.
     #[serde(default)]
     pub render: RenderSettings,
@@ -103,6 +109,7 @@ impl Default for Scene {
                 direction: Vec3::new(-0.4, -1.0, -0.3),
                 irradiance: Vec3::splat(3.0),
             }],
+            environment: None,
             render: RenderSettings::default(),
         }
     }
@@ -393,10 +400,32 @@ impl Scene {
                 }
             }
         }
+        if let Some(env) = &self.environment {
+            env.validate(path, self.first_sun())?;
+        }
         if self.render.spp == 0 {
             return bad("render.spp", "must be at least 1".into());
         }
         self.render.internal.validate(path)
+    }
+
+    /// The direction the scene's first sun's light travels, if it has one
+    /// (what a clear sky follows).
+    pub fn first_sun(&self) -> Option<Vec3> {
+        self.lights.iter().find_map(|l| match l {
+            Light::Sun { direction, .. } => Some(direction.normalize_or_zero()),
+            Light::Point { .. } => None,
+        })
+    }
+
+    /// Loads the environment map (relative to `scene_dir`, the folder of
+    /// the scene file) or bakes the clear sky; `None` without an
+    /// environment.
+    pub fn load_environment(&self, scene_dir: &Path) -> Result<Option<LoadedSky>, SceneError> {
+        self.environment
+            .as_ref()
+            .map(|env| env.load(scene_dir, self.first_sun()))
+            .transpose()
     }
 
     /// Loads or bakes the density field. Relative grid paths are resolved

@@ -429,6 +429,9 @@ struct DensityCache {
     /// reuses when only what does not change them changed
     /// ([`Prepared::with_scene`]).
     prepared: Option<Arc<Prepared>>,
+    /// The sky of the last scene (a map is read, a clear sky baked, once).
+    sky_key: Option<(Option<crate::scene::Environment>, Option<[u32; 3]>, PathBuf)>,
+    sky: Option<crate::scene::LoadedSky>,
 }
 
 impl DensityCache {
@@ -444,13 +447,33 @@ impl DensityCache {
 
     /// `scene`'s medium over `density` (from [`DensityCache::get`]),
     /// reusing the last job's volume where it can, and kept for the next.
-    fn prepare(&mut self, scene: &Scene, density: &Density) -> Arc<Prepared> {
+    fn prepare(
+        &mut self,
+        scene: &Scene,
+        density: &Density,
+        sky: &Option<crate::scene::LoadedSky>,
+    ) -> Arc<Prepared> {
         let prepared = Arc::new(match &self.prepared {
-            Some(last) => last.with_scene(scene.clone(), density.clone()),
-            None => Prepared::with_density(scene.clone(), density.clone()),
+            Some(last) => last.with_scene(scene.clone(), density.clone(), sky),
+            None => Prepared::with_loaded(scene.clone(), density.clone(), sky.clone()),
         });
         self.prepared = Some(prepared.clone());
         prepared
+    }
+
+    /// The scene's sky, loaded (`None` without one).
+    fn sky(
+        &mut self,
+        scene: &Scene,
+        dir: &Path,
+    ) -> Result<Option<crate::scene::LoadedSky>, String> {
+        let sun = scene.first_sun().map(|d| d.to_array().map(f32::to_bits));
+        let key = (scene.environment.clone(), sun, dir.to_path_buf());
+        if self.sky_key.as_ref() != Some(&key) {
+            self.sky = scene.load_environment(dir).map_err(|e| format!("{e:#}"))?;
+            self.sky_key = Some(key);
+        }
+        Ok(self.sky.clone())
     }
 }
 
@@ -512,6 +535,8 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>, gpu: Option<GpuContex
         key: None,
         density: None,
         prepared: None,
+        sky_key: None,
+        sky: None,
     };
     let mut lights_cache = LightsCache::default();
     let mut gpu = gpu.and_then(|ctx| match DisplayPass::new(&ctx) {
@@ -654,13 +679,20 @@ impl JobContext<'_> {
                 return self.next_command();
             }
         };
+        let sky = match cache.sky(&job.scene, &job.scene_dir) {
+            Ok(s) => s,
+            Err(e) => {
+                push_error(self.shared, e);
+                return self.next_command();
+            }
+        };
         if let Some(c) = self.newer() {
             return Some(c);
         }
         let bounds = Some(density.bounds());
         let (width, height) = (job.scene.camera.width, job.scene.camera.height);
         let t0 = Instant::now();
-        let prepared = cache.prepare(&job.scene, &density);
+        let prepared = cache.prepare(&job.scene, &density, &sky);
         trace("prepare", t0);
 
         // The internal lights, from the cache when only the camera changed.
@@ -676,6 +708,7 @@ impl JobContext<'_> {
         let mut preview = PreviewInput {
             density: &density,
             prepared: &prepared,
+            sky: &sky,
             bounds,
         };
         let lights = if !wants_internal {
@@ -953,6 +986,7 @@ struct PreviewInput<'a> {
     density: &'a Density,
     /// The job's medium at full resolution (the preview copies its volume).
     prepared: &'a Prepared,
+    sky: &'a Option<crate::scene::LoadedSky>,
     bounds: Option<(Vec3, Vec3)>,
 }
 
@@ -1000,11 +1034,11 @@ impl JobContext<'_> {
         let mut small = job.scene.clone();
         small.camera.width = (width / factor).max(1);
         small.camera.height = (height / factor).max(1);
-        let prepared_small = Arc::new(
-            input
-                .prepared
-                .with_scene(small.clone(), input.density.clone()),
-        );
+        let prepared_small = Arc::new(input.prepared.with_scene(
+            small.clone(),
+            input.density.clone(),
+            input.sky,
+        ));
         let gpu_streams = self.gpu.as_deref().map(|gpu| {
             let mut engines = gpu_engines(&gpu.ctx, job, &prepared_small, lights.as_deref())?;
             for (_, engine) in engines.iter_mut() {

@@ -116,8 +116,11 @@ pub fn load(path: &Path, current: &Scene) -> Result<Loaded, String> {
     let density = scene
         .load_density(&dir)
         .map_err(|e| format!("cannot open {}: {e:#}", path.display()))?;
+    let sky = scene
+        .load_environment(&dir)
+        .map_err(|e| format!("cannot open {}: {e:#}", path.display()))?;
     let bounds = density.bounds();
-    let prepared = Prepared::with_density(scene.clone(), density);
+    let prepared = Prepared::with_loaded(scene.clone(), density, sky);
     let warnings = crate::render::limits::warnings(&prepared, &scene.render)
         .into_iter()
         .map(|w| format!("{}: {w}", path.display()))

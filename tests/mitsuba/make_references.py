@@ -70,7 +70,17 @@ medium
         sampling without spectral MIS produces rare huge fireflies otherwise).
     albedo (RGB)  -> ``albedo = rgb(albedo)``.
     g             -> phase ``hg`` with the same ``g`` (g > 0 forward scattering).
-    No medium outside the shape, no environment emitter: black background.
+    No medium outside the shape: black background (see ``sky`` below).
+sky (optional; issue 24)
+    Constant(radiance)                -> ``constant`` emitter, ``radiance = rgb``.
+    Map(file, rotation_deg, scale)    -> ``envmap``: ``filename``, ``scale``,
+        ``to_world = rotate([0, 1, 0], rotation_deg)``; the map is the
+        committed 64x32 EXR ``sky_map.exr`` (``sky_map()`` below).
+    Lantern's ``background: false`` -> volpath ``hide_emitters = True`` (camera
+        rays that pass the medium's null interface unscattered see black);
+        the envmap's lookup conventions (texel (i, j) seen exactly at
+        u = (i + 1/2)/W, v = j/(H - 1); the rotation) are checked against
+        Mitsuba's own ``eval`` before rendering (``envmap_checks``).
 lights
     Sun(direction, irradiance)   -> ``directional``: ``direction`` (the direction
         light travels), ``irradiance = rgb`` (W/m^2 perpendicular to direction).
@@ -112,6 +122,9 @@ SPP_FULL = {  # per run
     # Two scenes of Lantern's suite (assets/scenes/suite/, issue 21) at 48x48:
     "suite_chromatic": 2048,  # per channel (3 grey renders)
     "suite_point_lit": 4096,
+    # Issue 24: skies.
+    "sky_constant_sphere": 2048,
+    "sky_map_cloud": 2048,
 }
 SPP_QUICK = 32
 RUNS_QUICK = 4
@@ -274,7 +287,64 @@ SCENES += [
     ),
 ]
 
+# Issue 24: environment light. A constant sky on a homogeneous sphere, and the
+# committed 64x32 map (sky_map.exr, turned 30 degrees) on the grid cloud, no
+# other light in either, the sky hidden from camera rays (hide_emitters).
+SKY_MAP_FILE = "sky_map.exr"
+SKY_MAP_SIZE = (64, 32)
+
+
+def sky_map():
+    """[H, W, 3] float32: a blue gradient sky, a bright soft 'sun' blob, a dark ground."""
+    w, h = SKY_MAP_SIZE
+    u = (np.arange(w) + 0.5) / w
+    v = np.arange(h) / (h - 1)
+    V, U = np.meshgrid(v, u, indexing="ij")
+    theta = V * math.pi
+    phi = U * 2 * math.pi
+    d = np.stack([np.sin(phi) * np.sin(theta), np.cos(theta), -np.cos(phi) * np.sin(theta)], axis=-1)
+    up = np.clip(d[..., 1], 0.0, 1.0)
+    sky = np.stack([0.35 + 0.25 * (1 - up), 0.5 + 0.2 * (1 - up), 0.9 + 0.0 * up], axis=-1)
+    ground = np.stack([0.12, 0.1, 0.08] * np.ones_like(up)[..., None], axis=-1).reshape(sky.shape)
+    img = np.where((d[..., 1] >= 0)[..., None], sky, ground)
+    sun = np.array(normalize((-0.5, 0.55, 0.4)))
+    blob = np.exp((d @ sun - 1.0) / 0.01)  # about 8 degrees wide
+    img = img + blob[..., None] * np.array([12.0, 10.0, 7.0])
+    return img.astype(np.float32)
+
+
+SCENES += [
+    dict(
+        name="sky_constant_sphere",
+        camera=dict(eye=(0.0, 0.0, 3.5), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
+                    fov_y_deg=40.0, width=48, height=48),
+        density=dict(kind="sphere", center=(0.0, 0.0, 0.0), radius=1.0),
+        density_scale=1.0,
+        sigma_t=(2.0, 2.0, 2.0),
+        albedo=(0.9, 0.8, 0.7),
+        g=0.4,
+        lights=[],
+        sky=dict(kind="constant", radiance=(0.6, 0.7, 1.0)),
+    ),
+    dict(
+        name="sky_map_cloud",
+        camera=dict(eye=(0.8, 0.55, 3.4), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
+                    fov_y_deg=40.0, width=48, height=48),
+        density=dict(kind="grid", file="grid_cloud.vol", bounds=GRID_BOUNDS),
+        density_scale=1.0,
+        sigma_t=(6.0, 6.0, 6.0),
+        albedo=(0.95, 0.9, 0.85),
+        g=0.6,
+        lights=[],
+        sky=dict(kind="map", file=SKY_MAP_FILE, rotation_deg=30.0, scale=1.5),
+    ),
+]
+
 NOTES = {
+    "sky_constant_sphere": "issue 24: constant sky (Mitsuba 'constant'), no other light, "
+                           "hide_emitters (Lantern background: false).",
+    "sky_map_cloud": "issue 24: the committed 64x32 sky_map.exr (Mitsuba 'envmap', to_world = "
+                     "rotate y 30 deg, scale 1.5) on the grid cloud, no other light, hide_emitters.",
     "chromatic_sphere": "sigma_t is chromatic: rendered as three grey scenes (one per RGB channel; "
                         "spp_per_run is per channel) because Mitsuba's single-channel distance sampling "
                         "gives rare huge fireflies in the high-sigma_t channel.",
@@ -346,10 +416,23 @@ def to_ron(sc, spp=LANTERN_SPP):
         "    lights: [",
         *lights,
         "    ],",
+        *sky_ron(sc),
         "    render: (method: Reference, spp: %d, seed: 0)," % spp,
         ")",
         "",
     ])
+
+
+def sky_ron(sc):
+    sky = sc.get("sky")
+    if sky is None:
+        return []
+    if sky["kind"] == "constant":
+        txt = "Constant(radiance: %s)" % v3(sky["radiance"])
+    else:
+        txt = 'Map(file: "%s", rotation_deg: %s, scale: %s)' % (
+            sky["file"], f(sky["rotation_deg"]), f(sky["scale"]))
+    return ["    environment: Some((sky: %s, background: false))," % txt]
 
 
 # --------------------------------------------------------------------------
@@ -425,8 +508,17 @@ def mitsuba_dicts(sc, mi, out_dir, spp):
         else:
             emitters["light%d" % i] = {"type": "point", "position": list(l["position"]),
                                        "intensity": rgb(l["intensity"])}
-    return dict(integrator={"type": "volpath", "max_depth": -1}, sensor=sensor,
-                medium_shape=shape, **emitters)
+    integrator = {"type": "volpath", "max_depth": -1}
+    sky = sc.get("sky")
+    if sky is not None:
+        integrator["hide_emitters"] = True
+        if sky["kind"] == "constant":
+            emitters["sky"] = {"type": "constant", "radiance": rgb(sky["radiance"])}
+        else:
+            emitters["sky"] = {"type": "envmap", "filename": os.path.join(out_dir, sky["file"]),
+                               "scale": float(sky["scale"]),
+                               "to_world": T().rotate([0, 1, 0], float(sky["rotation_deg"]))}
+    return dict(integrator=integrator, sensor=sensor, medium_shape=shape, **emitters)
 
 
 def project_to_pixel(cam, p):
@@ -650,6 +742,51 @@ def orientation_checks(mi, tmp_dir):
     return results
 
 
+def envmap_checks(mi, tmp_dir):
+    """Mitsuba's envmap lookup against the conventions Lantern implements
+    (src/physics/environment.rs): texel (i, j) of a W x H map is seen exactly
+    in direction (sin 2pi u sin t, cos t, -cos 2pi u sin t), u = (i + 1/2)/W,
+    t = pi j/(H - 1); to_world = rotate([0, 1, 0], a) turns local d into R_y(a) d."""
+    results = {}
+    img = sky_map()
+    h, w, _ = img.shape
+    path = os.path.join(tmp_dir, "check_map.exr")
+    write_exr(mi, path, img)
+    T = mi.ScalarTransform4f
+
+    def eval_dirs(emitter, dirs):
+        out = []
+        for d in dirs:
+            si = mi.SurfaceInteraction3f()
+            si.wi = mi.Vector3f(*(-np.asarray(d)))
+            out.append(np.array(emitter.eval(si)).reshape(-1)[:3])
+        return np.array(out)
+
+    rng = np.random.default_rng(1)
+    idx = [(int(i), int(j)) for i, j in zip(rng.integers(0, w, 40), rng.integers(1, h - 1, 40))]
+    dirs = []
+    for i, j in idx:
+        u, t = (i + 0.5) / w, math.pi * j / (h - 1)
+        ph = 2 * math.pi * u
+        dirs.append((math.sin(ph) * math.sin(t), math.cos(t), -math.cos(ph) * math.sin(t)))
+    em = mi.load_dict({"type": "envmap", "filename": path})
+    got = eval_dirs(em, dirs)
+    want = np.array([img[j, i] for i, j in idx])
+    err = float(np.abs(got - want).max() / np.abs(want).max())
+    results["envmap_texel_positions"] = dict(max_rel_err=err, ok=bool(err < 1e-4))
+    print("  envmap texel (i, j) at u = (i + 1/2)/W, v = j/(H - 1): max rel err %.2e -> %s"
+          % (err, "OK" if err < 1e-4 else "FAIL"))
+    a = 30.0
+    em_r = mi.load_dict({"type": "envmap", "filename": path, "to_world": T().rotate([0, 1, 0], a)})
+    c, s_ = math.cos(math.radians(a)), math.sin(math.radians(a))
+    world = [(c * x + s_ * z, y, -s_ * x + c * z) for x, y, z in dirs]
+    err_r = float(np.abs(eval_dirs(em_r, world) - want).max() / np.abs(want).max())
+    results["envmap_rotation"] = dict(max_rel_err=err_r, ok=bool(err_r < 1e-4))
+    print("  envmap rotate([0,1,0], 30) maps local d to (c x + s z, y, -s x + c z): max rel err %.2e -> %s"
+          % (err_r, "OK" if err_r < 1e-4 else "FAIL"))
+    return results
+
+
 # --------------------------------------------------------------------------
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -675,6 +812,7 @@ def main():
         print("Orientation checks:")
         with tempfile.TemporaryDirectory() as td:
             checks = orientation_checks(mi, td)
+            checks.update(envmap_checks(mi, td))
         if not all(v["ok"] for v in checks.values()):
             print("ORIENTATION CHECK FAILED", file=sys.stderr)
             sys.exit(1)
@@ -711,6 +849,8 @@ def main():
             fh.write(to_ron(sc))
         if sc["density"]["kind"] == "grid":
             write_vol(os.path.join(out_dir, sc["density"]["file"]), grid_cloud_density(), sc["density"]["bounds"])
+        if sc.get("sky", {}).get("kind") == "map":
+            write_exr(mi, os.path.join(out_dir, sc["sky"]["file"]), sky_map())
         t0 = time.time()
         imgs = render_scene_runs(mi, sc, out_dir, runs, spp)
         dt = time.time() - t0
