@@ -12,14 +12,16 @@ use glam::Vec3;
 use lantern::render::Prepared;
 use lantern::scene::Light;
 
-/// The suite, in the order of the issue.
-const SUITE: [&str; 6] = [
+/// The suite, in the order of the issue (and the sky-lit plume of the sky
+/// issue after it).
+const SUITE: [&str; 7] = [
     "wispy_smoke",
     "smoke_plume",
     "thick_cumulus",
     "thick_sphere_front_lit",
     "chromatic",
     "point_lit",
+    "sky_lit_plume",
 ];
 
 /// `∫ ρ dℓ` along `origin + t·dir` (unit `dir`) over the medium's box,
@@ -283,4 +285,18 @@ fn mitsuba_copies_are_the_suite_scenes() {
             _ => panic!("{suite}: both should be grids"),
         }
     }
+}
+
+/// The sky-lit plume is the smoke plume's medium under a sun and the clear
+/// sky that follows it, the sky not drawn behind it.
+#[test]
+fn sky_lit_plume_is_the_plume_under_a_clear_sky() {
+    let (sky, _) = load("sky_lit_plume");
+    let (plume, _) = load("smoke_plume");
+    assert_eq!(sky.scene.medium, plume.scene.medium);
+    let env = sky.scene.environment.as_ref().expect("an environment");
+    assert!(matches!(env.sky, lantern::scene::Sky::ClearSky { .. }));
+    assert!(!env.background);
+    assert!(sky.scene.first_sun().is_some());
+    assert!(sky.lights.environment.is_some());
 }

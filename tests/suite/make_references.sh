@@ -42,8 +42,9 @@ declare -A SPP=(
     [thick_sphere_front_lit]=24576 # 448 s
     [chromatic]=49152              # 442 s
     [point_lit]=32768              # ~300 s
+    [sky_lit_plume]=16384          # (issue 24: sun and clear sky)
 )
-ALL=(wispy_smoke smoke_plume thick_cumulus thick_sphere_front_lit chromatic point_lit)
+ALL=(wispy_smoke smoke_plume thick_cumulus thick_sphere_front_lit chromatic point_lit sky_lit_plume)
 
 if [[ ! -x "$LANTERN" ]]; then
     cargo build --release --locked
