@@ -399,3 +399,71 @@ fn bad_skies_are_refused_clearly() {
         background: true,
     };
 }
+
+/// The internal lights' own `S₁` holds the sky's share
+/// (`physics::internal::sky_arrival`): over the 64 lights of the furnace
+/// sphere (optical radius 2, `g` 0.5, so the sky's light at a light falls
+/// off towards the sphere's far side), each towards its own direction,
+/// `eval_s1` sums to what many one-sample estimates of the sky's
+/// single-scatter source at the same points and directions sum to, within
+/// 3 % (the harmonics' truncation) and the noise of both (each light's
+/// harmonics come from 256 directions: ±9–13 % per light).
+#[test]
+fn internal_lights_s1_holds_the_sky() {
+    let mut scene = furnace_scene(false);
+    scene.render.internal.lights = 64;
+    scene.render.internal.walks = 256;
+    scene.render.internal.view_share = 0.0;
+    let prepared = Prepared::new(scene, std::path::Path::new(".")).unwrap();
+    let lights = common::build_lights(&prepared, &prepared.scene.render);
+    let env = prepared.lights.sky().expect("a sky");
+    let mut rng = Rng::for_sample(9, 0, 0);
+    let scatter = prepared.volume.optics.albedo * prepared.volume.optics.sigma_t;
+    let (mut got, mut want, mut var) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+    let mut per_light = Vec::new();
+    for (i, light) in lights.lights.iter().enumerate() {
+        let n = Vec3::new(
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+        )
+        .normalize();
+        let s1 = lights.eval_s1(i, n);
+        let (w, e) = mean_stderr(4_000, |_| {
+            lantern::physics::reference::environment_source(
+                &prepared.volume,
+                env,
+                light.position,
+                n,
+                1.0,
+                &mut rng,
+            ) * scatter
+                * light.density
+        });
+        per_light.push((s1 / w).x);
+        got += s1;
+        want += w;
+        var += e * e;
+    }
+    let err = var.powf(0.5);
+    // The lights' own noise, from their spread about the sources.
+    let m = per_light.iter().sum::<f32>() / per_light.len() as f32;
+    let spread = (per_light.iter().map(|r| (r - m).powi(2)).sum::<f32>()
+        / (per_light.len() - 1) as f32)
+        .sqrt();
+    let own = want * (spread / (per_light.len() as f32).sqrt());
+    println!(
+        "Σ eval_s1 {got} against Σ sky source {want} ± {err}; per light eval/source {m:.3} ± {spread:.3}"
+    );
+    for c in 0..3 {
+        assert!(
+            (got[c] - want[c]).abs() < 0.03 * want[c] + 4.0 * (err[c] + own[c]),
+            "channel {c}: {} against {} ± {} (lights ± {})",
+            got[c],
+            want[c],
+            err[c],
+            own[c]
+        );
+    }
+    assert!(lights.term_energy[0].min_element() > 0.0);
+}

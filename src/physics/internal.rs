@@ -88,7 +88,7 @@ use super::placement::{place_lights_with, PlacementDensity};
 use super::reference::RR_START_DEPTH;
 use super::rng::Rng;
 use super::sh::{sh_basis, sh_count, MAX_COUNT, MAX_ORDER};
-use super::tracking::transmittance;
+use super::tracking::{transmittance, transmittance_at_rate};
 use super::view_placement::{knn_kernel_radius, place_in_view, ViewFrame};
 use super::volume::{DensityField, Volume};
 
@@ -96,6 +96,20 @@ use super::volume::{DensityField, Volume};
 /// from the placement's and the renders' (keep in sync with `WALK_PASS` in
 /// `shaders/walks/main.wgsl`).
 pub const WALK_PASS: u32 = 0x7761_6c6b;
+
+/// Stream index of the sky's light arriving at each internal light
+/// ([`sky_arrival`]; CPU only, for both backends' light sets).
+pub const SKY_PASS: u32 = 0x736b_7921;
+
+/// Directions per light of [`sky_arrival`]'s estimate, at least.
+const SKY_SAMPLES: u32 = 16;
+
+/// Tentative collisions per unit majorant of [`sky_arrival`]'s ratio
+/// tracking: at rate 1 a tight majorant (a homogeneous medium) makes each
+/// transmittance a yes-or-no estimate, and in the furnace sphere (optical
+/// radius 2) the lights' sky part scattered 0.83–1.34× its value at 256
+/// directions.
+const SKY_TRACKING_RATE: f32 = 4.0;
 
 /// Cells of the placement density along the longest axis of the box.
 pub const PLACEMENT_RESOLUTION: u32 = 64;
@@ -273,6 +287,10 @@ pub struct InternalLights {
     /// Light arriving at each internal light from each external light,
     /// `T E`, `external_count` per light.
     pub(crate) arrival: Vec<Vec3>,
+    /// The sky's light arriving at each internal light, `L(−ω) T` over the
+    /// directions `ω` it travels, as SH coefficients (`sh_count` per light;
+    /// empty without a sky): [`sky_arrival`].
+    pub(crate) sky: Vec<Vec3>,
     pub(crate) external: Lights,
     /// `α σ_t` (per unit density) and `g`.
     pub(crate) scatter: Vec3,
@@ -480,6 +498,65 @@ pub fn within_view_reach<D: DensityField>(
                 )
         })
         .collect()
+}
+
+/// The sky's light arriving at each of `lights`, `A_i(ω) = L(−ω)
+/// T(x_i, x_i − ∞ ω)` over the directions `ω` light travels, projected on
+/// the real spherical harmonics of `order`: `sh_count(order)` coefficients
+/// per light, estimated from [`SKY_SAMPLES`] (or `K`, if more) directions
+/// drawn from the sky's own distribution, each with a ratio-tracked
+/// transmittance; empty without a sky. With it, the lights' `S₁`
+/// ([`InternalLights::eval_s1`]: the field `L₁`'s points form, the `k = 0`
+/// energy and the gizmos' `J`) holds the sky's share as the walks' gates
+/// and the gather hold it, `b ∫ P(n·ω) A(ω) dω = b Σ g^l a_lm Y_lm(n)`.
+/// The sky is smooth, but a shadowed light's `A` is not: the harmonics
+/// keep its broad part.
+pub fn sky_arrival<D: DensityField>(
+    vol: &Volume<D>,
+    external: &Lights,
+    params: &InternalParams,
+    lights: &[InternalLight],
+    order: u32,
+) -> Vec<Vec3> {
+    let Some(env) = external.sky() else {
+        return Vec::new();
+    };
+    let count = sh_count(order);
+    let samples = params.walks.max(SKY_SAMPLES);
+    let per_light: Vec<Vec<Vec3>> = lights
+        .par_iter()
+        .enumerate()
+        .map(|(i, light)| {
+            let mut rng = Rng::for_sample(params.seed, i as u32, SKY_PASS);
+            let mut c = vec![Vec3::ZERO; count];
+            let mut y = [0.0f32; MAX_COUNT];
+            for _ in 0..samples {
+                let (u1, u2) = (rng.next_f32(), rng.next_f32());
+                let Some((from, pdf)) = env.sample(u1, u2) else {
+                    continue;
+                };
+                let radiance = env.radiance(from);
+                if pdf.is_nan() || pdf <= 0.0 || radiance == Vec3::ZERO {
+                    continue;
+                }
+                let t = transmittance_at_rate(
+                    vol,
+                    light.position,
+                    from,
+                    f32::INFINITY,
+                    SKY_TRACKING_RATE,
+                    &mut rng,
+                );
+                let a = radiance * t / (pdf * samples as f32);
+                sh_basis(order, -from, &mut y);
+                for (ck, &yk) in c.iter_mut().zip(&y[..count]) {
+                    *ck += a * yk;
+                }
+            }
+            c
+        })
+        .collect();
+    per_light.into_iter().flatten().collect()
 }
 
 /// The placement density of the internal lights in `vol` with uniform
@@ -819,6 +896,17 @@ impl InternalLights {
         };
         let fine_multi = by_slot(&multi_coeffs);
         let fine_scattered = by_slot(&scattered_coeffs);
+        let sky = sky_arrival(vol, external, params, &lights, order);
+        let mut term_energy = term_energy;
+        if !sky.is_empty() {
+            // k = 0 from the sky: ∫ S₁ dn = b ∫ L T dω, the harmonics'
+            // constant term over Y₀₀.
+            if let Some(e0) = term_energy.first_mut() {
+                for (i, light) in lights.iter().enumerate() {
+                    *e0 += light.weight * light.density * scatter * (sky[i * count] / Y00);
+                }
+            }
+        }
         let mut out = Self {
             params: *params,
             s_star: params.s_star,
@@ -834,6 +922,7 @@ impl InternalLights {
             multi_coeffs,
             scattered_coeffs,
             arrival,
+            sky,
             external: external.clone(),
             scatter,
             g: vol.optics.g,
@@ -917,6 +1006,22 @@ impl InternalLights {
             sum += arrival[l] * phase::hg(self.g, s.travel.dot(n));
             l += 1;
         });
+        if !self.sky.is_empty() {
+            // Funk–Hecke: the phase function scales the sky's band `l`
+            // by `g^l`.
+            let mut y = [0.0f32; MAX_COUNT];
+            sh_basis(self.sh_order, n, &mut y);
+            let c = &self.sky[i * self.sh_count..(i + 1) * self.sh_count];
+            let mut from_sky = Vec3::ZERO;
+            let mut g_l = 1.0;
+            for l in 0..=self.sh_order as usize {
+                for k in l * l..(l + 1) * (l + 1) {
+                    from_sky += c[k] * (g_l * y[k]);
+                }
+                g_l *= self.g;
+            }
+            sum += from_sky.max(Vec3::ZERO);
+        }
         sum * self.scatter * light.density
     }
 
@@ -994,9 +1099,15 @@ impl InternalLights {
     /// The mean of `J_i` over directions, `∫J_i dn / 4π`.
     pub fn mean_j(&self, i: usize) -> Vec3 {
         let n_ext = self.arrival.len() / self.lights.len().max(1);
-        let s1: Vec3 = self.arrival[i * n_ext..(i + 1) * n_ext]
+        let sky = if self.sky.is_empty() {
+            Vec3::ZERO
+        } else {
+            self.sky[i * self.sh_count] / Y00
+        };
+        let s1: Vec3 = (self.arrival[i * n_ext..(i + 1) * n_ext]
             .iter()
             .sum::<Vec3>()
+            + sky)
             * self.scatter
             * self.lights[i].density
             / (4.0 * std::f32::consts::PI);
