@@ -326,10 +326,24 @@ fn request_close(h: &mut Harness<'static, LanternApp>) {
 fn every_control_has_an_accessible_name_and_a_slider_moves_albedo() {
     let mut h = harness();
     h.run_steps(2);
-    for section in ["Medium", controls::EXPERT, "Lights"] {
+    for section in [
+        "Medium",
+        controls::EXPERT,
+        "Lights",
+        lantern::ui::sky::SECTION,
+    ] {
         h.get_by_label(section).click();
         h.run_steps(2);
     }
+    // The sky's widgets too, with a thumbnail shown.
+    h.get_by_label(lantern::ui::sky::CLEAR_SKY).click();
+    let start = Instant::now();
+    while h.state().sky.thumbnail_of().is_none() {
+        assert!(start.elapsed() < Duration::from_secs(30), "no thumbnail");
+        std::thread::sleep(Duration::from_millis(10));
+        h.step();
+    }
+    h.run_steps(2);
     h.check_accessibility();
     h.get_by_role_and_label(egui::accesskit::Role::Slider, "albedo (all channels)")
         .set_value_accesskit(0.5);
@@ -497,6 +511,12 @@ fn choosing_a_constant_sky_and_the_background_are_undoable_edits() {
         h.query_by_label(sky::BACKGROUND).is_none(),
         "no sky: no checkbox"
     );
+    // "Map" without a map yet offers the file and changes nothing.
+    h.get_by_label(sky::MAP).click();
+    h.run_steps(2);
+    assert!(h.query_by_label(sky::CHOOSE_MAP).is_some());
+    assert_eq!(h.state().doc.scene.environment, None);
+    assert!(!h.state().is_dirty());
     h.get_by_label(sky::CONSTANT).click();
     h.run_steps(2);
     assert!(

@@ -93,9 +93,10 @@ struct Thumbnail {
 pub struct SkyUi {
     /// A map being read before it becomes the sky: its path and the result.
     pending_map: Option<(PathBuf, Receiver<Result<(), String>>)>,
-    /// "Map" chosen without a map yet: the file button is shown, the
-    /// document is unchanged.
-    choosing_map: bool,
+    /// "Map" chosen without a map yet, with the environment it was chosen
+    /// from: the file button is shown and the document is unchanged. Any
+    /// other change of the environment (undo, another scene) ends it.
+    choosing_map: Option<Option<Environment>>,
     last_constant: Option<Vec3>,
     last_map: Option<Sky>,
     last_clear: Option<Sky>,
@@ -169,7 +170,7 @@ pub fn poll(app: &mut LanternApp, ctx: &egui::Context) {
                     scale: 1.0,
                 },
             );
-            app.sky.choosing_map = false;
+            app.sky.choosing_map = None;
             app.notify(format!("sky map: {}", path.display()));
         }
         Err(e) => app.notify_error(format!("sky map not used: {e}")),
@@ -227,7 +228,16 @@ fn clear_sky_error(app: &LanternApp) -> Option<String> {
 /// Draws the section.
 pub fn sky_ui(ui: &mut Ui, app: &mut LanternApp) {
     let current = kind_of(&app.doc.scene.environment);
-    let shown = if current != Kind::Map && app.sky.choosing_map {
+    if app
+        .sky
+        .choosing_map
+        .as_ref()
+        .is_some_and(|from| *from != app.doc.scene.environment)
+    {
+        app.sky.choosing_map = None;
+    }
+    let choosing = app.sky.choosing_map.is_some();
+    let shown = if current != Kind::Map && choosing {
         Kind::Map
     } else {
         current
@@ -267,7 +277,7 @@ pub fn sky_ui(ui: &mut Ui, app: &mut LanternApp) {
         );
     }
 
-    if app.sky.choosing_map && current != Kind::Map {
+    if app.sky.choosing_map.is_some() && current != Kind::Map {
         // Nothing changes until a map is chosen and loads.
         map_file_ui(ui, app, None);
     } else {
@@ -306,7 +316,7 @@ fn choose(app: &mut LanternApp, current: Kind, chosen: Kind) {
             s @ Sky::ClearSky { .. } => app.sky.last_clear = Some(s.clone()),
         }
     }
-    app.sky.choosing_map = false;
+    app.sky.choosing_map = None;
     match chosen {
         Kind::None => app.doc.scene.environment = None,
         Kind::Constant => {
@@ -316,7 +326,11 @@ fn choose(app: &mut LanternApp, current: Kind, chosen: Kind) {
         Kind::Map => match app.sky.last_map.clone() {
             Some(map) => set_sky(app, map),
             // Nothing changes until a map is chosen and loads.
-            None => app.sky.choosing_map = current != Kind::Map,
+            None => {
+                if current != Kind::Map {
+                    app.sky.choosing_map = Some(app.doc.scene.environment.clone());
+                }
+            }
         },
         Kind::Clear => {
             let sky = app.sky.last_clear.clone().unwrap_or(Sky::ClearSky {
