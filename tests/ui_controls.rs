@@ -718,3 +718,30 @@ fn a_bad_dropped_map_leaves_the_scene_and_names_the_file() {
     assert!(!h.state().history.can_undo(), "nothing to undo");
     assert!(!h.state().is_dirty());
 }
+
+/// Saving writes the map's path so that the saved scene finds it: here the
+/// scene's folder shares no folder with the map's, so the path is absolute.
+#[test]
+fn a_saved_scene_finds_its_dropped_map() {
+    use lantern::scene::{Scene, Sky};
+    let mut h = harness();
+    h.run_steps(2);
+    drop_file(&mut h, &sky_map());
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("with_sky.ron");
+    h.state_mut().save_to(&path);
+    assert!(!h.state().is_dirty());
+    let saved = Scene::load(&path).expect("the saved scene loads");
+    let Some(Sky::Map { file, .. }) = saved.environment.as_ref().map(|e| &e.sky) else {
+        panic!("{:?}", saved.environment)
+    };
+    let found = dir.path().join(file);
+    assert_eq!(
+        std::fs::canonicalize(found).expect("the map is found"),
+        std::fs::canonicalize(sky_map()).expect("map")
+    );
+    assert!(
+        saved.load_environment(dir.path()).is_ok(),
+        "the saved scene's sky loads"
+    );
+}
