@@ -326,10 +326,24 @@ fn request_close(h: &mut Harness<'static, LanternApp>) {
 fn every_control_has_an_accessible_name_and_a_slider_moves_albedo() {
     let mut h = harness();
     h.run_steps(2);
-    for section in ["Medium", controls::EXPERT, "Lights"] {
+    for section in [
+        "Medium",
+        controls::EXPERT,
+        "Lights",
+        lantern::ui::sky::SECTION,
+    ] {
         h.get_by_label(section).click();
         h.run_steps(2);
     }
+    // The sky's widgets too, with a thumbnail shown.
+    h.get_by_label(lantern::ui::sky::CLEAR_SKY).click();
+    let start = Instant::now();
+    while h.state().sky.thumbnail_of().is_none() {
+        assert!(start.elapsed() < Duration::from_secs(30), "no thumbnail");
+        std::thread::sleep(Duration::from_millis(10));
+        h.step();
+    }
+    h.run_steps(2);
     h.check_accessibility();
     h.get_by_role_and_label(egui::accesskit::Role::Slider, "albedo (all channels)")
         .set_value_accesskit(0.5);
@@ -444,4 +458,290 @@ fn choosing_the_gpu_without_one_falls_back_to_the_cpu_with_a_notice() {
     assert_eq!(h.state().session.backend, Backend::Cpu);
     assert!(h.query_by_label_contains("GPU unavailable").is_none());
     assert!(h.query_by_label("rendering on the CPU").is_some());
+}
+
+/// The committed 64×32 sky map.
+fn sky_map() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/mitsuba/sky_map.exr")
+}
+
+fn open_sky_section(h: &mut Harness<'static, LanternApp>) {
+    h.get_by_label(lantern::ui::sky::SECTION).click();
+    h.run_steps(2);
+}
+
+/// A file dropped on the window, as an integration hands it to egui.
+#[derive(Debug)]
+struct Dropped(std::path::PathBuf);
+
+impl egui::DroppedFile for Dropped {
+    fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        std::fs::read(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+/// Drops `path` on the window and steps until the map has been read.
+fn drop_file(h: &mut Harness<'static, LanternApp>, path: &std::path::Path) {
+    h.input_mut()
+        .dropped_files
+        .push(std::sync::Arc::new(Dropped(path.to_owned())));
+    h.step();
+    let start = Instant::now();
+    while h.state().sky.is_loading_map() {
+        assert!(start.elapsed() < Duration::from_secs(30), "map not read");
+        std::thread::sleep(Duration::from_millis(10));
+        h.step();
+    }
+    h.run_steps(2);
+}
+
+#[test]
+fn choosing_a_constant_sky_and_the_background_are_undoable_edits() {
+    use lantern::scene::{Environment, Sky};
+    use lantern::ui::sky;
+    let mut h = harness();
+    h.run_steps(2);
+    assert_eq!(h.state().doc.scene.environment, None);
+    open_sky_section(&mut h);
+    assert!(
+        h.query_by_label(sky::BACKGROUND).is_none(),
+        "no sky: no checkbox"
+    );
+    // "Map" without a map yet offers the file and changes nothing.
+    h.get_by_label(sky::MAP).click();
+    h.run_steps(2);
+    assert!(h.query_by_label(sky::CHOOSE_MAP).is_some());
+    assert_eq!(h.state().doc.scene.environment, None);
+    assert!(!h.state().is_dirty());
+    h.get_by_label(sky::CONSTANT).click();
+    h.run_steps(2);
+    assert!(
+        matches!(
+            h.state().doc.scene.environment,
+            Some(Environment {
+                sky: Sky::Constant { .. },
+                background: false
+            })
+        ),
+        "{:?}",
+        h.state().doc.scene.environment
+    );
+    assert!(h.state().is_dirty());
+    assert!(
+        h.state().job().scene.environment.is_some(),
+        "the render follows"
+    );
+
+    h.get_by_label(sky::BACKGROUND).click();
+    h.run_steps(2);
+    assert!(h
+        .state()
+        .doc
+        .scene
+        .environment
+        .as_ref()
+        .is_some_and(|e| e.background));
+
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, sky::RADIANCE)
+        .set_value_accesskit(2.0);
+    h.run_steps(2);
+    match &h.state().doc.scene.environment {
+        Some(Environment {
+            sky: Sky::Constant { radiance },
+            ..
+        }) => assert!((radiance.max_element() - 2.0).abs() < 1e-4, "{radiance}"),
+        other => panic!("{other:?}"),
+    }
+
+    // Undo: the radiance, then the background, then the sky itself.
+    for _ in 0..2 {
+        h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+        h.run_steps(2);
+    }
+    assert!(h
+        .state()
+        .doc
+        .scene
+        .environment
+        .as_ref()
+        .is_some_and(|e| !e.background));
+    h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+    h.run_steps(2);
+    assert_eq!(h.state().doc.scene.environment, None);
+    assert!(!h.state().is_dirty());
+
+    // A clear sky follows the sun; without one it says what the loader says.
+    h.get_by_label(sky::CLEAR_SKY).click();
+    h.run_steps(2);
+    assert!(matches!(
+        h.state().doc.scene.environment.as_ref().map(|e| &e.sky),
+        Some(Sky::ClearSky { .. })
+    ));
+    assert!(h
+        .query_by_label_contains("Follows the scene's first sun")
+        .is_some());
+    h.get_by_label(sky::NONE).click();
+    h.state_mut().doc.scene.lights.clear();
+    h.run_steps(2);
+    assert!(
+        h.query_by_label_contains("has no Sun light").is_some(),
+        "the loader's error is shown"
+    );
+}
+
+#[test]
+fn a_dropped_map_becomes_the_sky_with_a_thumbnail_and_undo_removes_it() {
+    use lantern::scene::Sky;
+    let mut h = harness();
+    h.run_steps(2);
+    open_sky_section(&mut h);
+    drop_file(&mut h, &sky_map());
+    let app = h.state();
+    let env = app.doc.scene.environment.clone().expect("a sky");
+    let Sky::Map {
+        file,
+        rotation_deg,
+        scale,
+    } = &env.sky
+    else {
+        panic!("{env:?}")
+    };
+    assert_eq!((*rotation_deg, *scale), (0.0, 1.0));
+    // Relative to the scene's folder where it can be, and found from it.
+    assert!(file.is_relative(), "{file:?}");
+    assert_eq!(
+        std::fs::canonicalize(app.scene_dir.join(file)).expect("the map is found"),
+        std::fs::canonicalize(sky_map()).expect("map")
+    );
+    assert!(
+        app.toasts.iter().all(|t| !t.error),
+        "{:?}",
+        app.toasts.iter().map(|t| &t.text).collect::<Vec<_>>()
+    );
+    assert!(app.is_dirty());
+    assert!(
+        h.query_by_label(&file.display().to_string()).is_some(),
+        "the path is shown"
+    );
+
+    // The thumbnail is built off the UI thread, then drawn.
+    let start = Instant::now();
+    while h.state().sky.thumbnail_of() != Some(&env.sky) {
+        assert!(start.elapsed() < Duration::from_secs(30), "no thumbnail");
+        std::thread::sleep(Duration::from_millis(10));
+        h.step();
+    }
+    h.get_by_role_and_label(egui::accesskit::Role::Slider, lantern::ui::sky::ROTATION)
+        .set_value_accesskit(30.0);
+    h.run_steps(2);
+    assert!(matches!(
+        h.state().doc.scene.environment.as_ref().map(|e| &e.sky),
+        Some(Sky::Map { rotation_deg, .. }) if (*rotation_deg - 30.0).abs() < 1e-4
+    ));
+    assert!(
+        matches!(
+            h.state().sky.thumbnail_of(),
+            Some(Sky::Map { rotation_deg, .. }) if (*rotation_deg - 30.0).abs() < 1e-4
+        ),
+        "the thumbnail follows the rotation"
+    );
+
+    for _ in 0..2 {
+        h.key_press_modifiers(egui::Modifiers::COMMAND, egui::Key::Z);
+        h.run_steps(2);
+    }
+    assert_eq!(
+        h.state().doc.scene.environment,
+        None,
+        "one undo step per edit"
+    );
+    assert!(!h.state().is_dirty());
+    wait_for_image(&mut h);
+}
+
+#[test]
+fn a_bad_dropped_map_leaves_the_scene_and_names_the_file() {
+    let mut h = harness();
+    h.run_steps(2);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let truncated = dir.path().join("truncated_sky.exr");
+    let bytes = std::fs::read(sky_map()).expect("map");
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).expect("write");
+    let square = dir.path().join("square_sky.exr");
+    {
+        use exr::prelude::*;
+        let channels = SpecificChannels::rgb(|_: Vec2<usize>| (1.0f32, 1.0f32, 1.0f32));
+        Image::from_channels((16, 16), channels)
+            .write()
+            .to_file(&square)
+            .expect("write exr");
+    }
+    let nan = dir.path().join("nan_sky.exr");
+    {
+        use exr::prelude::*;
+        let channels = SpecificChannels::rgb(|Vec2(x, _): Vec2<usize>| {
+            (if x == 3 { f32::NAN } else { 1.0f32 }, 1.0f32, 1.0f32)
+        });
+        Image::from_channels((8, 4), channels)
+            .write()
+            .to_file(&nan)
+            .expect("write exr");
+    }
+    let missing = dir.path().join("missing_sky.hdr");
+    let before = h.state().doc.clone();
+    for (path, why) in [
+        (&truncated, "OpenEXR"),
+        (&square, "16×16"),
+        (&nan, "non-negative"),
+        (&missing, "missing_sky.hdr"),
+    ] {
+        h.state_mut().toasts.clear();
+        drop_file(&mut h, path);
+        assert_eq!(h.state().doc, before, "{path:?} changed the scene");
+        let name = path.file_name().and_then(|n| n.to_str()).expect("name");
+        let toast = h
+            .state()
+            .toasts
+            .iter()
+            .find(|t| t.error)
+            .unwrap_or_else(|| panic!("no error for {name}"));
+        assert!(
+            toast.text.contains(name) && toast.text.contains(why),
+            "{}",
+            toast.text
+        );
+    }
+    assert!(!h.state().history.can_undo(), "nothing to undo");
+    assert!(!h.state().is_dirty());
+}
+
+/// Saving writes the map's path so that the saved scene finds it: here the
+/// scene's folder shares no folder with the map's, so the path is absolute.
+#[test]
+fn a_saved_scene_finds_its_dropped_map() {
+    use lantern::scene::{Scene, Sky};
+    let mut h = harness();
+    h.run_steps(2);
+    drop_file(&mut h, &sky_map());
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("with_sky.ron");
+    h.state_mut().save_to(&path);
+    assert!(!h.state().is_dirty());
+    let saved = Scene::load(&path).expect("the saved scene loads");
+    let Some(Sky::Map { file, .. }) = saved.environment.as_ref().map(|e| &e.sky) else {
+        panic!("{:?}", saved.environment)
+    };
+    let found = dir.path().join(file);
+    assert_eq!(
+        std::fs::canonicalize(found).expect("the map is found"),
+        std::fs::canonicalize(sky_map()).expect("map")
+    );
+    assert!(
+        saved.load_environment(dir.path()).is_ok(),
+        "the saved scene's sky loads"
+    );
 }

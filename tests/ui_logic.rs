@@ -145,3 +145,140 @@ fn the_session_round_trips_and_tolerates_old_files() {
     assert_eq!(old.exposure, -2.0);
     assert_eq!(old.res_scale, Session::default().res_scale);
 }
+
+/// The sky thumbnail's lat-long mapping is the renderer's: the inverse of
+/// `map_direction`, +z in the middle, +x a quarter of the width from the left, up on top.
+#[test]
+fn sky_thumbnail_mapping_inverts_the_maps_directions() {
+    use lantern::scene::environment::map_direction;
+    use lantern::ui::sky::{direction_to_uv, sun_marker_uv};
+    for i in 0..16 {
+        for j in 1..8 {
+            let (u, v) = (i as f32 / 16.0 + 0.01, j as f32 / 8.0);
+            let [u2, v2] = direction_to_uv(map_direction(u, v));
+            assert!(
+                (u - u2).abs() < 1e-4 && (v - v2).abs() < 1e-4,
+                "{u} {v}: {u2} {v2}"
+            );
+        }
+    }
+    let near = |a: [f32; 2], b: [f32; 2]| (a[0] - b[0]).abs() < 1e-5 && (a[1] - b[1]).abs() < 1e-5;
+    assert!(near(direction_to_uv(Vec3::Z), [0.5, 0.5]));
+    assert!(near(direction_to_uv(Vec3::X), [0.25, 0.5]));
+    assert!(near(direction_to_uv(Vec3::NEG_X), [0.75, 0.5]));
+    assert!(near(direction_to_uv(Vec3::NEG_Z), [0.0, 0.5]));
+    assert_eq!(direction_to_uv(Vec3::Y)[1], 0.0);
+    // The marker sits where the light comes from: a sun shining down along
+    // −z from 45° above the horizon is marked in the middle, a quarter down.
+    let travel = Vec3::new(0.0, -1.0, -1.0).normalize();
+    let m = sun_marker_uv(travel).expect("a sun");
+    assert!(near(m, [0.5, 0.25]), "{m:?}");
+    assert_eq!(sun_marker_uv(Vec3::ZERO), None);
+}
+
+/// The thumbnail's lookup is the renderer's bilinear map lookup, rotation
+/// included, and a bright texel shows under the marker of its direction.
+#[test]
+fn sky_thumbnail_agrees_with_the_renderers_lookup_and_rotation() {
+    use lantern::physics::environment::EnvMap;
+    use lantern::scene::environment::map_direction;
+    use lantern::scene::SkyMap;
+    use lantern::ui::sky::{direction_to_uv, map_radiance, thumbnail_pixels};
+    let (w, h) = (32u32, 16u32);
+    let mut texels: Vec<Vec3> = (0..w * h)
+        .map(|k| Vec3::new((k % w) as f32 / w as f32, (k / w) as f32 / h as f32, 0.25))
+        .collect();
+    let env = EnvMap::new(w, h, &texels, 30.0, 1.0);
+    let map = SkyMap {
+        width: w,
+        height: h,
+        texels: texels.clone(),
+    };
+    for k in 0..200 {
+        let d = map_direction((k as f32 * 0.618_034).fract(), (k as f32 + 0.5) / 200.0);
+        let (a, b) = (map_radiance(&map, 30.0, d), env.radiance(d));
+        assert!((a - b).length() < 1e-4, "{d}: {a} against {b}");
+    }
+    // One bright texel, the map turned by 50°: the brightest thumbnail
+    // pixel is where that texel's direction, turned, is marked.
+    texels.iter_mut().for_each(|t| *t = Vec3::splat(0.1));
+    let (i, j) = (5usize, 6usize);
+    texels[j * w as usize + i] = Vec3::splat(100.0);
+    let map = SkyMap {
+        width: w,
+        height: h,
+        texels,
+    };
+    let local = map_direction((i as f32 + 0.5) / w as f32, j as f32 / (h - 1) as f32);
+    let world = glam::Quat::from_rotation_y(50f32.to_radians()) * local;
+    let size = [128u32, 64u32];
+    let pixels = thumbnail_pixels(&map, 50.0, size);
+    let brightest = (0..pixels.len())
+        .max_by(|&a, &b| pixels[a].x.total_cmp(&pixels[b].x))
+        .expect("pixels");
+    let at = [
+        (brightest % 128) as f32 / 128.0 + 0.5 / 128.0,
+        (brightest / 128) as f32 / 64.0 + 0.5 / 64.0,
+    ];
+    let want = direction_to_uv(world);
+    assert!(
+        (at[0] - want[0]).abs() < 1.5 / 128.0 && (at[1] - want[1]).abs() < 1.5 / 64.0,
+        "brightest at {at:?}, texel turned to {want:?}"
+    );
+    let bytes = lantern::ui::sky::thumbnail_srgb(&pixels);
+    assert_eq!(bytes.len(), 128 * 64 * 3);
+}
+
+/// Sky map paths are saved relative to the scene's folder where they can
+/// be, with `..` for a sibling folder.
+#[test]
+fn sky_map_paths_are_saved_relative_to_the_scene() {
+    use lantern::scene::{Environment, Scene, Sky};
+    use lantern::ui::sky::{relative_path, scene_for_saving};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let root = std::fs::canonicalize(dir.path()).expect("dir");
+    std::fs::create_dir_all(root.join("maps")).expect("maps");
+    std::fs::create_dir_all(root.join("scenes/deep")).expect("scenes");
+    std::fs::write(root.join("maps/sky.exr"), b"x").expect("map");
+    assert_eq!(
+        relative_path(&root.join("maps/sky.exr"), &root.join("scenes/deep")),
+        std::path::PathBuf::from("../../maps/sky.exr")
+    );
+    assert_eq!(
+        relative_path(&root.join("maps/sky.exr"), &root),
+        std::path::PathBuf::from("maps/sky.exr")
+    );
+    let scene = Scene {
+        environment: Some(Environment {
+            sky: Sky::Map {
+                file: "maps/sky.exr".into(),
+                rotation_deg: 10.0,
+                scale: 2.0,
+            },
+            background: true,
+        }),
+        ..Scene::default()
+    };
+    // The document's paths refer to `root`; saved into scenes/, the map is
+    // one folder up.
+    let saved = scene_for_saving(&scene, &root, &root.join("scenes/a.ron"));
+    match saved.environment.as_ref().map(|e| &e.sky) {
+        Some(Sky::Map {
+            file,
+            rotation_deg,
+            scale,
+        }) => {
+            assert_eq!(file, &std::path::PathBuf::from("../maps/sky.exr"));
+            assert_eq!((*rotation_deg, *scale), (10.0, 2.0));
+        }
+        other => panic!("{other:?}"),
+    }
+    // Saved and reopened from there, the scene finds its map.
+    let path = root.join("scenes/a.ron");
+    saved.save(&path).expect("save");
+    let back = Scene::load(&path).expect("load");
+    match back.environment.as_ref().map(|e| &e.sky) {
+        Some(Sky::Map { file, .. }) => assert!(root.join("scenes").join(file).exists()),
+        other => panic!("{other:?}"),
+    }
+}

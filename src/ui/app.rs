@@ -393,6 +393,9 @@ pub struct LanternApp {
     close_confirmed: bool,
     script: Option<Script>,
     script_state: ScriptState,
+    /// The Sky section's state outside the document (map being read,
+    /// thumbnail).
+    pub sky: super::sky::SkyUi,
 }
 
 impl LanternApp {
@@ -509,6 +512,7 @@ impl LanternApp {
             close_confirmed: false,
             script: None,
             script_state: ScriptState::default(),
+            sky: Default::default(),
         }
     }
 
@@ -590,7 +594,9 @@ impl LanternApp {
 
     /// Saves the document to `path`.
     pub fn save_to(&mut self, path: &Path) {
-        match self.doc.scene.save(path) {
+        // A sky map's path is written relative to the scene's new folder.
+        let scene = super::sky::scene_for_saving(&self.doc.scene, &self.scene_dir, path);
+        match scene.save(path) {
             Ok(()) => {
                 self.saved = self.doc.clone();
                 self.path = Some(path.to_owned());
@@ -782,12 +788,15 @@ impl LanternApp {
                 .map(|f| f.path().to_owned())
                 .collect()
         });
+        super::sky::poll(self, ctx);
         if let Some(path) = dropped.first() {
-            if files::is_openable(path) {
+            if super::sky::is_sky_map(path) {
+                super::sky::open_map(self, path);
+            } else if files::is_openable(path) {
                 self.open(path);
             } else {
                 self.notify_error(format!(
-                    "{}: not a scene (.ron) or a volume (.vdb, .vol)",
+                    "{}: not a scene (.ron), a volume (.vdb, .vol) or a sky map (.exr, .hdr)",
                     path.display()
                 ));
             }

@@ -55,6 +55,9 @@ pub fn panel_ui(ui: &mut Ui, app: &mut LanternApp) {
         egui::CollapsingHeader::new("Lights")
             .default_open(false)
             .show(ui, |ui| lights_ui(ui, app));
+        egui::CollapsingHeader::new(super::sky::SECTION)
+            .default_open(false)
+            .show(ui, |ui| super::sky::sky_ui(ui, app));
         egui::CollapsingHeader::new("Render")
             .default_open(true)
             .show(ui, |ui| render_ui(ui, app));

@@ -7,6 +7,8 @@
 //!
 //! - [`app`]: the application state, the frame loop, undo and the session.
 //! - [`controls`]: the side panel of parameters.
+//! - [`sky`]: the Sky section (environment light), its thumbnail, and
+//!   sky maps dropped on the window.
 //! - [`viewport`]: the progressive image, camera navigation, gizmos and the
 //!   comparisons (split view, error heatmap).
 //! - [`files`]: scene files, drag and drop, recent files and image export.
@@ -18,6 +20,7 @@ pub mod backend;
 pub mod controls;
 pub mod files;
 pub mod gpu_view;
+pub mod sky;
 pub mod viewport;
 
 use std::path::PathBuf;
