@@ -93,8 +93,8 @@ use super::view_placement::{knn_kernel_radius, place_in_view, ViewFrame};
 use super::volume::{DensityField, Volume};
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) of the walks, apart
-/// from the placement's and the renders' (keep in sync with `WALK_PASS` in
-/// `shaders/walks/main.wgsl`).
+/// from the placement's and the renders' (the WGSL's `WALK_PASS` is
+/// generated from it).
 pub const WALK_PASS: u32 = 0x7761_6c6b;
 
 /// Cells of the placement density along the longest axis of the box.
@@ -1148,7 +1148,7 @@ impl InternalLights {
 }
 
 /// `π (3 − √5)`, the golden angle of the spherical Fibonacci lattice.
-const GOLDEN_ANGLE: f32 = 2.399_963;
+pub const GOLDEN_ANGLE: f32 = 2.399_963;
 
 /// A uniformly random rotation (Shoemake's uniform unit quaternion).
 fn random_rotation(rng: &mut Rng) -> glam::Quat {
