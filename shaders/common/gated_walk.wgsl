@@ -5,7 +5,7 @@
 // callback of `accumulate_j_from` is written out as `gate_add`.
 
 // From Rust (the generated prelude, src/gpu/shaders.rs): the clock tags
-// `CLOCK_*` (crate::gpu::mirrors::CLOCK_*); the largest majorant optical
+// `CLOCK_*` (crate::scene::Clock::tag); the largest majorant optical
 // depth of one step of the optical-depth clock's quadrature, as a fraction
 // of the window `s*`, `CLOCK_SPLIT_WINDOW`
 // (crate::physics::gated_walk::CLOCK_SPLIT_WINDOW), and the most steps in

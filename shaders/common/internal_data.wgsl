@@ -62,7 +62,7 @@ struct GatherParams {
 
 // The clock tags `CLOCK_*` and the forms of the gather's L₁, `L1_*`, come
 // from Rust (the generated prelude, src/gpu/shaders.rs:
-// crate::gpu::mirrors::{CLOCK_*, L1_*}).
+// crate::scene::{Clock, L1Form}::tag).
 
 @group(0) @binding(6) var<uniform> gather_params: GatherParams;
 @group(0) @binding(7) var<storage, read> internal_vec4: array<vec4<f32>>;

@@ -183,17 +183,6 @@ pub struct GpuLight {
 }
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
 
-/// Clock tags (`CLOCK_*` in the WGSL prelude).
-pub const CLOCK_GEOMETRIC: u32 = 0;
-/// The optical-depth clock.
-pub const CLOCK_OPTICAL_DEPTH: u32 = 1;
-
-/// Forms of the gather's `L₁` (`L1_*` in the WGSL prelude): one scattering of the
-/// reconstructed field (`L1Form::Field`).
-pub const L1_FIELD: u32 = 0;
-/// The sum over the point lights (`L1Form::Points`).
-pub const L1_POINTS: u32 = 1;
-
 /// Constants of the cached internal lights and the offsets of their tables
 /// in the two packed buffers (see `gpu::gather`). Keep in sync with
 /// `GatherParams` in `shaders/common/internal_data.wgsl`.

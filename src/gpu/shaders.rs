@@ -142,14 +142,15 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!("ENV_NONE", U32, crate::gpu::mirrors::ENV_NONE),
     shared!("ENV_CONSTANT", U32, crate::gpu::mirrors::ENV_CONSTANT),
     shared!("ENV_MAP", U32, crate::gpu::mirrors::ENV_MAP),
-    shared!("CLOCK_GEOMETRIC", U32, crate::gpu::mirrors::CLOCK_GEOMETRIC),
+    // The settings' enums (`scene/settings.rs`).
+    shared!("CLOCK_GEOMETRIC", U32, crate::scene::Clock::Geometric.tag()),
     shared!(
         "CLOCK_OPTICAL_DEPTH",
         U32,
-        crate::gpu::mirrors::CLOCK_OPTICAL_DEPTH
+        crate::scene::Clock::OpticalDepth.tag()
     ),
-    shared!("L1_FIELD", U32, crate::gpu::mirrors::L1_FIELD),
-    shared!("L1_POINTS", U32, crate::gpu::mirrors::L1_POINTS),
+    shared!("L1_FIELD", U32, crate::scene::L1Form::Field.tag()),
+    shared!("L1_POINTS", U32, crate::scene::L1Form::Points.tag()),
     // The display pass (`gpu/display.rs`).
     shared!("VIEW_CLAMP", U32, crate::gpu::display::VIEW_CLAMP),
     shared!("VIEW_FILMIC", U32, crate::gpu::display::VIEW_FILMIC),

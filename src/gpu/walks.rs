@@ -36,12 +36,9 @@ use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use super::context::{GpuContext, GpuError};
-use super::mirrors::{
-    GpuPassParams, GpuPlacementParams, GpuWalkParams, CLOCK_GEOMETRIC, CLOCK_OPTICAL_DEPTH,
-};
+use super::mirrors::{GpuPassParams, GpuPlacementParams, GpuWalkParams};
 use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
-use crate::physics::gated_walk::Clock;
 use crate::physics::internal::{
     kernel_radius_for, place_internal_lights, within_view_reach, InternalLight, InternalLights,
     InternalParams, LightSources,
@@ -387,10 +384,7 @@ fn walk(
     let mut walk_params = GpuWalkParams {
         s_star: params.s_star,
         n_terms: params.terms,
-        clock: match params.clock {
-            Clock::Geometric => CLOCK_GEOMETRIC,
-            Clock::OpticalDepth => CLOCK_OPTICAL_DEPTH,
-        },
+        clock: params.clock.tag(),
         rr_start: RR_START_DEPTH,
         walks,
         sh_order: order,

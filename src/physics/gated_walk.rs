@@ -89,15 +89,9 @@ use super::rng::{pcg_hash, Rng};
 use super::tracking::{free_flight, spectral_event, TentativeEvent, TentativeSteps};
 use super::volume::{DensityField, Volume};
 
-/// What the walk's clock counts between gates.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Clock {
-    /// Geometric path length `ℓ`: gates at `ℓ = k s*` (the note's choice).
-    Geometric,
-    /// Grey optical depth `τ = ∫ max(σ_t) ρ dℓ`: gates at `τ = k s*`, so
-    /// that each window holds on average `s*` collisions ([method §7](crate::doc::method)).
-    OpticalDepth,
-}
+/// What the walk's clock counts between gates: the settings' enum, one
+/// for the scene file, the command line, the estimators and the GPU.
+pub use crate::scene::settings::Clock;
 
 /// Parameters of the time-gated walk.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -106,17 +106,10 @@ const LIGHTS_PER_CLUSTER: f32 = 24.0;
 /// Most clusters along an axis.
 const MAX_CLUSTER_RES: u32 = 12;
 
-/// The form of the final gather's `L₁` (see [`super::gather`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum L1Form {
-    /// One scattering of the reconstructed field `J = S₁ + Ĵ`: no bounded
-    /// kernel, so no softening bias.
-    #[default]
-    Field,
-    /// The note's sum over the point lights with the bounded kernel
-    /// `1/(r² + h₁²)`.
-    Points,
-}
+/// The form of the final gather's `L₁` (see [`super::gather`]): the
+/// settings' enum, one for the scene file, the command line, the
+/// estimators and the GPU.
+pub use crate::scene::settings::L1Form;
 
 /// Parameters of the internal lights, resolved (no defaults left open).
 #[derive(Clone, Copy, Debug, PartialEq)]
