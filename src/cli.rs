@@ -24,7 +24,7 @@ use crate::render::tonemap::ViewTransform;
 use crate::render::{
     internal_params, internal_params_for_set, light_set, light_set_starting, Film, Prepared,
 };
-use crate::scene::{ClockKind, InternalSettings, L1Kind, Method, Quality, RenderSettings, Scene};
+use crate::scene::{Clock, InternalSettings, L1Form, Method, Quality, RenderSettings, Scene};
 
 /// Lantern: multiple scattering as internal lights, live.
 #[derive(Debug, Parser)]
@@ -33,15 +33,6 @@ pub struct Cli {
     /// What to do; without one, the previewer opens.
     #[command(subcommand)]
     pub command: Option<Command>,
-}
-
-/// Estimator names on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum MethodArg {
-    /// The unbiased volumetric path tracer.
-    Reference,
-    /// Multiple scatter as internal lights.
-    Internal,
 }
 
 /// Which backend renders.
@@ -81,42 +72,6 @@ impl std::str::FromStr for ImageSize {
             }
         };
         Ok(Self { width, height })
-    }
-}
-
-/// Clock names on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum ClockArg {
-    /// Geometric path length (`s*` is a distance).
-    Geometric,
-    /// Optical depth (`s*` is a number of mean free paths).
-    OpticalDepth,
-}
-
-impl From<ClockArg> for ClockKind {
-    fn from(c: ClockArg) -> Self {
-        match c {
-            ClockArg::Geometric => ClockKind::Geometric,
-            ClockArg::OpticalDepth => ClockKind::OpticalDepth,
-        }
-    }
-}
-
-/// Forms of the gather's L1 on the command line.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
-pub enum L1Arg {
-    /// One scattering of the reconstructed field J (default).
-    Field,
-    /// The note's sum over point lights with a bounded kernel.
-    Points,
-}
-
-impl From<L1Arg> for L1Kind {
-    fn from(c: L1Arg) -> Self {
-        match c {
-            L1Arg::Field => L1Kind::Field,
-            L1Arg::Points => L1Kind::Points,
-        }
     }
 }
 
@@ -168,10 +123,10 @@ pub struct InternalArgs {
     pub uniform_mix: Option<f32>,
     /// What the path-length clock counts.
     #[arg(long, value_enum)]
-    pub clock: Option<ClockArg>,
+    pub clock: Option<Clock>,
     /// The form of the gather's L1 (single scatter of the internal lights).
     #[arg(long, value_enum)]
-    pub l1: Option<L1Arg>,
+    pub l1: Option<L1Form>,
     /// Scatterings inside the final window that the field form of L1
     /// follows (1: the note's single-scatter kernel; 2, 3: the next terms).
     #[arg(long)]
@@ -222,10 +177,10 @@ impl InternalArgs {
             settings.uniform_mix = v;
         }
         if let Some(v) = self.clock {
-            settings.clock = v.into();
+            settings.clock = v;
         }
         if let Some(v) = self.l1 {
-            settings.l1 = v.into();
+            settings.l1 = v;
         }
         if let Some(v) = self.window_scatters {
             settings.window_scatters = v;
@@ -358,15 +313,6 @@ fn write_render(
     Ok(())
 }
 
-impl From<MethodArg> for Method {
-    fn from(m: MethodArg) -> Self {
-        match m {
-            MethodArg::Reference => Method::Reference,
-            MethodArg::Internal => Method::Internal,
-        }
-    }
-}
-
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
@@ -382,7 +328,7 @@ pub enum Command {
         scene: PathBuf,
         /// The estimator (default: the scene's setting).
         #[arg(long, value_enum)]
-        method: Option<MethodArg>,
+        method: Option<Method>,
         /// Samples per pixel (default: the scene's setting).
         #[arg(long)]
         spp: Option<u32>,
@@ -431,8 +377,8 @@ pub enum Command {
         #[arg(long)]
         threads: Option<usize>,
         /// The estimator.
-        #[arg(long, value_enum, default_value_t = MethodArg::Reference)]
-        method: MethodArg,
+        #[arg(long, value_enum, default_value_t = Method::Reference)]
+        method: Method,
         /// Which backend renders (gpu: for the internal-lights method the
         /// lights are placed and walked on the GPU too; only their spatial
         /// indices are built on the CPU).
@@ -479,16 +425,7 @@ pub fn run(cli: Cli) -> Result<()> {
         }) => {
             set_threads(threads)?;
             render_command(
-                &scene,
-                method.map(Method::from),
-                spp,
-                &out,
-                seed,
-                backend,
-                exposure,
-                view,
-                &internal,
-                &timed,
+                &scene, method, spp, &out, seed, backend, exposure, view, &internal, &timed,
             )
         }
         Some(Command::Bench {
@@ -502,15 +439,7 @@ pub fn run(cli: Cli) -> Result<()> {
             internal,
         }) => {
             set_threads(threads)?;
-            bench_command(
-                scenes,
-                spp,
-                repeats,
-                size,
-                method.into(),
-                backend,
-                &internal,
-            )
+            bench_command(scenes, spp, repeats, size, method, backend, &internal)
         }
         Some(Command::Validate(args)) => crate::validate::run(&args),
         Some(Command::Converge(args)) => crate::converge::run(&args),

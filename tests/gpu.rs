@@ -41,7 +41,7 @@ use lantern::gpu::shaders::{ModuleSource, MODULES};
 use lantern::gpu::GpuRenderer;
 use lantern::physics::internal::InternalLights;
 use lantern::render::{internal_params, Film, Prepared};
-use lantern::scene::{ClockKind, InternalSettings, L1Kind, Method, RenderSettings};
+use lantern::scene::{Clock, InternalSettings, L1Form, Method, RenderSettings};
 
 /// Parses and validates one assembled module, naming the file and line of
 /// the first error.
@@ -356,7 +356,7 @@ const CPU_SPP_PER_GPU_SPP: u32 = 8;
 /// `clock` and the form `l1` of `L₁`), then gathers with them at `side`²,
 /// `spp` samples per pixel on the GPU and [`CPU_SPP_PER_GPU_SPP`] times as
 /// many on the CPU, and compares.
-fn agree_gather(scene: &str, clock: ClockKind, l1: L1Kind, side: u32, spp: u32) {
+fn agree_gather(scene: &str, clock: Clock, l1: L1Form, side: u32, spp: u32) {
     agree_gather_with(scene, side, spp, |s| {
         s.clock = clock;
         s.l1 = l1;
@@ -483,8 +483,8 @@ fn reference_agrees_puffs_grid() {
 fn gather_agrees_thin_sphere() {
     agree_gather(
         "assets/scenes/thin_sphere.ron",
-        ClockKind::OpticalDepth,
-        L1Kind::Field,
+        Clock::OpticalDepth,
+        L1Form::Field,
         24,
         256,
     );
@@ -494,8 +494,8 @@ fn gather_agrees_thin_sphere() {
 fn gather_agrees_thin_sphere_geometric_clock() {
     agree_gather(
         "assets/scenes/thin_sphere.ron",
-        ClockKind::Geometric,
-        L1Kind::Field,
+        Clock::Geometric,
+        L1Form::Field,
         24,
         256,
     );
@@ -518,8 +518,8 @@ fn gather_agrees_puffs_at_the_defaults() {
 fn gather_agrees_chromatic_sphere() {
     agree_gather(
         "assets/scenes/chromatic_sphere.ron",
-        ClockKind::OpticalDepth,
-        L1Kind::Field,
+        Clock::OpticalDepth,
+        L1Form::Field,
         24,
         256,
     );
@@ -594,8 +594,8 @@ fn gather_agrees_puffs_renewed_sets_unclamped() {
 fn gather_agrees_thin_sphere_point_lights() {
     agree_gather(
         "assets/scenes/thin_sphere.ron",
-        ClockKind::OpticalDepth,
-        L1Kind::Points,
+        Clock::OpticalDepth,
+        L1Form::Points,
         24,
         128,
     );

@@ -25,8 +25,9 @@ use lantern::gpu::mirrors::GpuAccum;
 use lantern::gpu::GpuContext;
 use lantern::render::film::image_mean;
 use lantern::render::tonemap::{to_srgb8, ViewTransform};
+use lantern::scene::Method;
 use lantern::scene::Scene;
-use lantern::ui::backend::{Backend, Estimator, Job, Snapshot, Worker};
+use lantern::ui::backend::{Backend, Job, Snapshot, Worker};
 use lantern::ui::viewport::heat;
 use wgpu::util::DeviceExt;
 
@@ -246,7 +247,7 @@ fn statistics_pass_equals_the_cpu_sums() {
 
 /// A job on `scene` at `side`² with one estimator, `spp` samples per pixel
 /// and `seed`.
-fn job(scene: &str, side: u32, estimator: Estimator, spp: u32, seed: u64, backend: Backend) -> Job {
+fn job(scene: &str, side: u32, estimator: Method, spp: u32, seed: u64, backend: Backend) -> Job {
     let path = common::root().join(scene);
     let mut scene = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
     scene.camera.width = side;
@@ -288,7 +289,7 @@ fn render_with(worker: &mut Worker, job: Job) -> (Arc<Snapshot>, Vec<String>) {
 /// backends run the same estimator).
 fn worker_agrees(
     scene: &str,
-    estimator: Estimator,
+    estimator: Method,
     side: u32,
     gpu_spp: u32,
     cpu_spp: u32,
@@ -365,7 +366,7 @@ fn worker_agrees(
 fn gpu_worker_agrees_with_cpu_worker_reference() {
     worker_agrees(
         "assets/scenes/thin_sphere.ron",
-        Estimator::Reference,
+        Method::Reference,
         24,
         256,
         256,
@@ -379,7 +380,7 @@ fn gpu_worker_agrees_with_cpu_worker_internal_lights() {
     // which must be the same set for the two to estimate the same thing.
     worker_agrees(
         "assets/scenes/thin_sphere.ron",
-        Estimator::Internal,
+        Method::Internal,
         24,
         64,
         256,
@@ -423,7 +424,7 @@ fn a_scene_too_large_for_the_device_falls_back_to_the_cpu_with_a_notice() {
         job(
             "assets/scenes/thin_sphere.ron",
             32,
-            Estimator::Reference,
+            Method::Reference,
             4,
             1,
             Backend::Gpu,
@@ -444,7 +445,7 @@ fn a_scene_too_large_for_the_device_falls_back_to_the_cpu_with_a_notice() {
         job(
             "assets/scenes/thin_sphere.ron",
             32,
-            Estimator::Reference,
+            Method::Reference,
             2,
             3,
             Backend::Gpu,

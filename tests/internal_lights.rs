@@ -26,7 +26,7 @@
 mod common;
 
 use glam::Vec3;
-use lantern::scene::{ClockKind, L1Kind, Method};
+use lantern::scene::{Clock, L1Form, Method};
 use lantern::validate::compare;
 
 /// The squared error less both images' variance of the mean, relative to
@@ -66,13 +66,13 @@ fn prepare_32(
         s.camera.width = 32;
         s.camera.height = 32;
         let i = &mut s.render.internal;
-        i.clock = ClockKind::OpticalDepth;
+        i.clock = Clock::OpticalDepth;
         i.s_star = Some(s_star);
         i.terms = terms;
         i.lights = lights;
         i.walks = walks;
         i.sh_order = sh_order;
-        i.l1 = L1Kind::Field;
+        i.l1 = L1Form::Field;
         note_placement(i);
     }))
 }
@@ -179,7 +179,7 @@ fn puffs_view_walks_agree_with_reference() {
         s.camera.width = 32;
         s.camera.height = 32;
         let i = &mut s.render.internal;
-        i.clock = ClockKind::OpticalDepth;
+        i.clock = Clock::OpticalDepth;
         i.s_star = Some(0.25);
         i.terms = 160;
         i.lights = 16384;
@@ -187,7 +187,7 @@ fn puffs_view_walks_agree_with_reference() {
         note_placement(i);
         i.view_walks = 256;
         i.sh_order = 4;
-        i.l1 = L1Kind::Field;
+        i.l1 = L1Form::Field;
     }));
     let reference = common::render(&prepared, Method::Reference, 7, 32768);
     let internal = common::render(&prepared, Method::Internal, 8, 1024);

@@ -9,7 +9,6 @@ use egui_kittest::kittest::{NodeT, Queryable};
 use egui_kittest::Harness;
 use lantern::scene::Method;
 use lantern::ui::app::CompareMode;
-use lantern::ui::backend::Estimator;
 use lantern::ui::controls;
 use lantern::ui::LanternApp;
 
@@ -203,10 +202,7 @@ fn split_and_error_views_render_both_estimators_and_show_the_rmse() {
     h.run_steps(2);
     assert_eq!(h.state().session.compare, CompareMode::Split);
     let job = h.state().job();
-    assert_eq!(
-        job.estimators,
-        vec![Estimator::Internal, Estimator::Reference]
-    );
+    assert_eq!(job.estimators, vec![Method::Internal, Method::Reference]);
     wait_for_image(&mut h);
 
     h.get_by_label("Error").click();
@@ -226,7 +222,7 @@ fn split_and_error_views_render_both_estimators_and_show_the_rmse() {
     h.get_by_label("Reference").click();
     h.run_steps(2);
     assert_eq!(h.state().doc.scene.render.method, Method::Reference);
-    assert_eq!(h.state().job().estimators, vec![Estimator::Reference]);
+    assert_eq!(h.state().job().estimators, vec![Method::Reference]);
 }
 
 #[test]

@@ -3,11 +3,12 @@
 
 use glam::Vec3;
 use lantern::scene::Camera;
+use lantern::scene::Method;
 use lantern::ui::app::{CompareMode, Session};
-use lantern::ui::backend::{Estimator, StreamImage};
+use lantern::ui::backend::StreamImage;
 use lantern::ui::{files, viewport};
 
-fn stream(estimator: Estimator, value: Vec3, n: usize) -> StreamImage {
+fn stream(estimator: Method, value: Vec3, n: usize) -> StreamImage {
     StreamImage {
         estimator,
         width: n as u32,
@@ -78,8 +79,8 @@ fn exr_export_refuses_mismatched_layers() {
 
 #[test]
 fn error_heatmap_reports_the_rmse() {
-    let a = stream(Estimator::Internal, Vec3::splat(1.5), 8);
-    let b = stream(Estimator::Reference, Vec3::splat(1.0), 8);
+    let a = stream(Method::Internal, Vec3::splat(1.5), 8);
+    let b = stream(Method::Reference, Vec3::splat(1.0), 8);
     let (image, rmse, mean) = viewport::error_heatmap(&a, &b);
     assert_eq!(image.size, [8, 1]);
     assert!((rmse - 0.5).abs() < 1e-6, "rmse {rmse}");

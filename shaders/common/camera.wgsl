@@ -10,9 +10,9 @@ fn camera_ray_dir(px: f32, py: f32) -> vec3<f32> {
     return normalize(c.forward + c.right_scaled * sx + c.up_scaled * sy);
 }
 
-// Workgroup side in pixels of the per-pixel entry points; keep in sync
-// with `WORKGROUP_SIDE` in src/gpu/renderer.rs.
-const WORKGROUP_SIDE: u32 = 8u;
+// Workgroup side in pixels of the per-pixel entry points:
+// `WORKGROUP_SIDE`, from Rust (the generated prelude, src/gpu/shaders.rs:
+// crate::gpu::renderer::WORKGROUP_SIDE).
 
 // The start of one pixel's sample in a pass (mirrors `Renderer::pass` in
 // src/cpu/mod.rs): its index (rows top to bottom), its random stream for

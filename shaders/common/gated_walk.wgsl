@@ -4,16 +4,13 @@
 // `accumulate_j_from`. WGSL has no closures, so the CPU's `on_gate`
 // callback of `accumulate_j_from` is written out as `gate_add`.
 
-// Clock tags (`Clock`; keep in sync with `CLOCK_*` in src/gpu/mirrors.rs).
-const CLOCK_GEOMETRIC: u32 = 0u;
-const CLOCK_OPTICAL_DEPTH: u32 = 1u;
-
-// The largest majorant optical depth of one step of the optical-depth
-// clock's quadrature, as a fraction of the window `s*`
-// (`CLOCK_SPLIT_WINDOW`), and the most steps in one majorant cell
-// (`CLOCK_MAX_STEPS`).
-const CLOCK_SPLIT_WINDOW: f32 = 0.25;
-const CLOCK_MAX_STEPS: f32 = 64.0;
+// From Rust (the generated prelude, src/gpu/shaders.rs): the clock tags
+// `CLOCK_*` (crate::scene::Clock::tag); the largest majorant optical
+// depth of one step of the optical-depth clock's quadrature, as a fraction
+// of the window `s*`, `CLOCK_SPLIT_WINDOW`
+// (crate::physics::gated_walk::CLOCK_SPLIT_WINDOW), and the most steps in
+// one majorant cell, `CLOCK_MAX_STEPS`
+// (crate::physics::gated_walk::CLOCK_MAX_STEPS).
 
 // The quadrature step in a majorant cell of extinction majorant `m` under
 // the window `s_star`, `cell` being the cell's smallest extent
@@ -37,9 +34,9 @@ fn lattice_phase(dir: vec3<f32>) -> f32 {
 }
 
 // Most gates a walk on the GPU records, `N + 1` (a private array per
-// invocation; keep in sync with `GPU_MAX_TERMS` in src/gpu/walks.rs, which
-// refuses larger `N` with an error).
-const GPU_MAX_GATES: u32 = 257u;
+// invocation): `GPU_MAX_GATES`, from Rust (the generated prelude:
+// crate::gpu::walks::GPU_MAX_TERMS + 1; src/gpu/walks.rs refuses larger `N`
+// with an error).
 
 // A guard against a walk that never ends, which the CPU does not need (as
 // `MAX_COLLISIONS_GUARD` of reference.wgsl: the roulette survives at most
@@ -47,9 +44,8 @@ const GPU_MAX_GATES: u32 = 257u;
 const WALK_COLLISIONS_GUARD: u32 = 4096u;
 
 // Collisions of a walk after which its directions are guided; later ones
-// come from the phase function alone (`GUIDED_COLLISIONS` in
-// `physics/gated_walk.rs`).
-const GUIDED_COLLISIONS: u32 = 2u;
+// come from the phase function alone: `GUIDED_COLLISIONS`, from Rust (the
+// generated prelude: crate::physics::gated_walk::GUIDED_COLLISIONS).
 
 // Per-gate terms of one walk, `k = 0..=N`.
 alias GateTerms = array<vec3<f32>, GPU_MAX_GATES>;
@@ -156,10 +152,10 @@ fn march_clock(
     return ClockMarch(acc, false, 0.0);
 }
 
-// The least `collision_probability` returns (`COLLISION_FLOOR`).
-const COLLISION_FLOOR: f32 = 0.05;
-// The optical depth past which it is one (`COLLISION_DEPTH`).
-const COLLISION_DEPTH: f32 = 12.0;
+// From Rust (the generated prelude): the least `collision_probability`
+// returns, `COLLISION_FLOOR` (crate::physics::gated_walk::COLLISION_FLOOR),
+// and the optical depth past which it is one, `COLLISION_DEPTH`
+// (crate::physics::gated_walk::COLLISION_DEPTH).
 
 // The chance that light travelling from `p` along `d` collides before it
 // leaves the box, `1 − e^{−τ}` with `τ` the grey optical depth to the exit
@@ -234,10 +230,9 @@ var<private> walk_collided_only: bool;
 
 // Probability that a walk's direction after a collision is drawn towards an
 // external light rather than from the phase function, and the
-// Henyey–Greenstein parameter of those lobes (`GUIDE_PROBABILITY`,
-// `GUIDE_G` in src/physics/gated_walk.rs).
-const GUIDE_PROBABILITY: f32 = 0.3;
-const GUIDE_G: f32 = 0.5;
+// Henyey–Greenstein parameter of those lobes: `GUIDE_PROBABILITY` and
+// `GUIDE_G`, from Rust (the generated prelude:
+// crate::physics::gated_walk::{GUIDE_PROBABILITY, GUIDE_G}).
 
 // A walk's next direction and the factor its weight takes.
 struct GuidedDirection {

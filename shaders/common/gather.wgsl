@@ -34,12 +34,11 @@
 // extinction at its ends and `τ_l` by the trapezoid rule, mixed with the
 // uniform share `SEGMENT_DEFENSIVE` (optical-depth clock); uniform within a
 // piece.
-// The gather's ratio tracking samples tentative collisions at this many
-// times the majorant (`TRACKING_RATE` in src/physics/gather.rs).
-const TRACKING_RATE: f32 = 8.0;
-
-const SEGMENT_PIECES: u32 = 16u;
-const SEGMENT_DEFENSIVE: f32 = 0.1;
+// The gather's ratio tracking samples tentative collisions at
+// `TRACKING_RATE` times the majorant. It and `SEGMENT_PIECES`,
+// `SEGMENT_DEFENSIVE` come from Rust (the generated prelude:
+// crate::physics::gather::TRACKING_RATE,
+// crate::physics::segment_pdf::{PIECES, DEFENSIVE}).
 
 struct SegmentPdf {
     t0: f32,

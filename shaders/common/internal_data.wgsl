@@ -60,11 +60,9 @@ struct GatherParams {
     _pad1: u32,
 }
 
-// The clock tags `CLOCK_*` are in gated_walk.wgsl.
-
-// Forms of the gather's L₁ (keep in sync with `L1_*` in src/gpu/mirrors.rs).
-const L1_FIELD: u32 = 0u;
-const L1_POINTS: u32 = 1u;
+// The clock tags `CLOCK_*` and the forms of the gather's L₁, `L1_*`, come
+// from Rust (the generated prelude, src/gpu/shaders.rs:
+// crate::scene::{Clock, L1Form}::tag).
 
 @group(0) @binding(6) var<uniform> gather_params: GatherParams;
 @group(0) @binding(7) var<storage, read> internal_vec4: array<vec4<f32>>;

@@ -2,10 +2,10 @@
 // src/physics/lights.rs: what one light delivers at a point, before
 // attenuation.
 
-// Smallest squared distance to a point light (`MIN_DIST2`).
-const MIN_DIST2: f32 = 1e-8;
-// Beyond this offset along an axis a light is far (`FAR_LIGHT`).
-const FAR_LIGHT: f32 = 1e19;
+// From Rust (the generated prelude, src/gpu/shaders.rs): the smallest
+// squared distance to a point light, `MIN_DIST2`
+// (crate::physics::lights::MIN_DIST2), and the offset along an axis beyond
+// which a light is far, `FAR_LIGHT` (crate::physics::lights::FAR_LIGHT).
 
 // The light arriving at a point from one external light (`LightSample`).
 struct LightSample {

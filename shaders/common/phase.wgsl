@@ -2,10 +2,9 @@
 // src/physics/phase.rs: `P(μ) = (1 − g²) / (4π (1 + g² − 2gμ)^{3/2})`, μ the
 // cosine between the directions light travels before and after scattering.
 
-const PI: f32 = 3.14159265358979;
-
-// Below this |g| sampling is isotropic (`ISOTROPIC_EPS`).
-const HG_ISOTROPIC_EPS: f32 = 1e-3;
+// From Rust (the generated prelude, src/gpu/shaders.rs): `PI`
+// (std::f32::consts::PI) and the |g| below which sampling is isotropic,
+// `HG_ISOTROPIC_EPS` (crate::physics::phase::ISOTROPIC_EPS).
 
 // `P(μ)` in 1/sr (`hg`).
 fn hg(g: f32, cos_theta: f32) -> f32 {

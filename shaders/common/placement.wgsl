@@ -11,8 +11,8 @@
 // other random numbers. The tables are declared by the entry point
 // (shaders/placement/main.wgsl).
 
-// Stream index of the placement (`PLACEMENT_PASS`).
-const PLACEMENT_PASS: u32 = 0x706c6163u;
+// Stream index of the placement: `PLACEMENT_PASS`, from Rust (the
+// generated prelude: crate::physics::placement::PLACEMENT_PASS).
 
 // A placed point and its pdf.
 struct PlacedSample {

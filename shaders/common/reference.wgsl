@@ -5,8 +5,8 @@
 // camera; at a real collision the path arriving along `dir` receives light
 // scattered into `-dir`.
 
-// Collisions after which Russian roulette starts (`RR_START_DEPTH`).
-const RR_START_DEPTH: u32 = 3u;
+// Collisions after which Russian roulette starts: `RR_START_DEPTH`, from
+// Rust (the generated prelude: crate::physics::reference::RR_START_DEPTH).
 
 // A guard against a path that never ends, which the CPU does not need: the
 // roulette survives at most 0.95 per collision, so the light it cuts off is

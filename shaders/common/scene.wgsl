@@ -86,14 +86,9 @@ struct Light {
     _pad0: u32,
 }
 
-const DENSITY_SPHERE: u32 = 0u;
-const DENSITY_BOX: u32 = 1u;
-const DENSITY_GRID: u32 = 2u;
-const LIGHT_SUN: u32 = 0u;
-const LIGHT_POINT: u32 = 1u;
-const ENV_NONE: u32 = 0u;
-const ENV_CONSTANT: u32 = 1u;
-const ENV_MAP: u32 = 2u;
+// The tags `DENSITY_*`, `LIGHT_*` and `ENV_*` come from Rust (the
+// generated prelude, src/gpu/shaders.rs: crate::gpu::mirrors::DENSITY_*,
+// LIGHT_*, ENV_*).
 
 @group(0) @binding(0) var<uniform> scene: Scene;
 @group(0) @binding(1) var<uniform> pass_params: PassParams;

@@ -4,37 +4,10 @@
 // without trigonometry from `(x + iy)^m` and the recurrence for
 // `P_l^m(z) / sin^m θ`.
 
-// The highest supported order (`MAX_ORDER`).
-const SH_MAX_ORDER: u32 = 4u;
-
-// `K_l^|m|` (times √2 for m ≠ 0), indexed by `l(l+1) + m` (`NORM`).
-const SH_NORM = array<f32, 25>(
-    0.2820948,
-    0.4886025,
-    0.4886025,
-    0.4886025,
-    0.1820914,
-    0.3641828,
-    0.6307831,
-    0.3641828,
-    0.1820914,
-    0.03933624,
-    0.09635371,
-    0.3046972,
-    0.7463527,
-    0.3046972,
-    0.09635371,
-    0.03933624,
-    0.00596034,
-    0.016858388,
-    0.06307831,
-    0.2676186,
-    0.8462844,
-    0.2676186,
-    0.06307831,
-    0.016858388,
-    0.00596034,
-);
+// From Rust (the generated prelude, src/gpu/shaders.rs): the highest
+// supported order, `SH_MAX_ORDER` (crate::physics::sh::MAX_ORDER), and
+// `K_l^|m|` (times √2 for m ≠ 0), indexed by `l(l+1) + m`, `SH_NORM`
+// (crate::physics::sh::NORM).
 
 // `Y_i(dir)` for `i < (order + 1)²`, the rest zero (`sh_basis`).
 fn sh_basis(order: u32, dir: vec3<f32>) -> array<f32, 25> {

@@ -3,9 +3,8 @@
 // in stops, then the view transform (clamp, or Narkowicz's ACES filmic fit
 // clamped to 1), then the sRGB transfer function (IEC 61966-2-1).
 
-// View transforms; keep in sync with `VIEW_*` in src/gpu/display.rs.
-const VIEW_CLAMP: u32 = 0u;
-const VIEW_FILMIC: u32 = 1u;
+// View transforms: the tags `VIEW_*`, from Rust (the generated prelude,
+// src/gpu/shaders.rs: crate::gpu::display::VIEW_*).
 
 // The sRGB opto-electronic transfer function (`srgb_encode`).
 fn srgb_encode(x: f32) -> f32 {

@@ -2,7 +2,7 @@
 
 @group(0) @binding(3) var output: texture_storage_2d<rgba8unorm, write>;
 
-@compute @workgroup_size(8, 8)
+@compute @workgroup_size(WORKGROUP_SIDE, WORKGROUP_SIDE)
 fn display_image(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= params.width || id.y >= params.height {
         return;

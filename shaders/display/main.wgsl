@@ -13,9 +13,9 @@
 // Keep `DisplayParams` in sync with `GpuDisplayParams` in
 // src/gpu/display.rs.
 
-const MODE_SINGLE: u32 = 0u;
-const MODE_SPLIT: u32 = 1u;
-const MODE_HEAT: u32 = 2u;
+// The modes `MODE_*` and the view transforms `VIEW_*` come from Rust (the
+// generated prelude, src/gpu/shaders.rs: crate::gpu::display::MODE_*,
+// VIEW_*).
 
 struct DisplayParams {
     width: u32,

@@ -8,9 +8,9 @@ const STATS_THREADS: u32 = 256u;
 
 @group(0) @binding(3) var<storage, read_write> stats: array<vec4<f32>>;
 
-var<workgroup> partial: array<vec4<f32>, 256>;
+var<workgroup> partial: array<vec4<f32>, STATS_THREADS>;
 
-@compute @workgroup_size(256)
+@compute @workgroup_size(STATS_THREADS)
 fn display_stats(@builtin(local_invocation_index) t: u32) {
     let count = params.width * params.height;
     let lum = vec3<f32>(0.2126, 0.7152, 0.0722);

@@ -30,7 +30,7 @@ struct PlacementParams {
 // Two vec4 per light (see above).
 @group(0) @binding(8) var<storage, read_write> placed: array<vec4<f32>>;
 
-@compute @workgroup_size(64, 1, 1)
+@compute @workgroup_size(PLACEMENT_LANES, 1, 1)
 fn place_lights(@builtin(global_invocation_id) id: vec3<u32>) {
     // The scene's bindings are shared by every pipeline (one bind group
     // for all, built by the renderer); these three are otherwise unused here

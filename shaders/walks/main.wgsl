@@ -25,18 +25,17 @@
 // src/physics/internal.rs). Keep
 // `WalkParams` in sync with `GpuWalkParams` in src/gpu/mirrors.rs.
 
-// Stream index of the walks (`WALK_PASS` in src/physics/internal.rs).
-const WALK_PASS: u32 = 0x77616c6bu;
-
-// Invocations (walks) per workgroup; keep in sync with `WALK_LANES` in
-// src/gpu/walks.rs.
-const WALK_LANES: u32 = 64u;
+// From Rust (the generated prelude, src/gpu/shaders.rs): the stream index
+// of the walks, `WALK_PASS` (crate::physics::internal::WALK_PASS), and the
+// invocations (walks) per workgroup, `WALK_LANES`
+// (crate::gpu::walks::WALK_LANES).
 
 // Quantities reduced per round of the workgroup reduction.
 const ROUND: u32 = 8u;
 
-// `π (3 − √5)`, the golden angle of the spherical Fibonacci lattice.
-const GOLDEN_ANGLE: f32 = 2.399963;
+// `π (3 − √5)`, the golden angle of the spherical Fibonacci lattice:
+// `GOLDEN_ANGLE`, from Rust (the generated prelude:
+// crate::physics::internal::GOLDEN_ANGLE).
 
 // Parameters of the walks.
 struct WalkParams {
@@ -66,7 +65,7 @@ struct WalkParams {
 // Per light `record_stride` vec4 (see above), accumulated.
 @group(0) @binding(7) var<storage, read_write> walk_out: array<vec4<f32>>;
 
-var<workgroup> partial: array<vec4<f32>, 512>;
+var<workgroup> partial: array<vec4<f32>, WALK_LANES * ROUND>;
 
 // Rotates `v` by the unit quaternion `q` (xyz: vector part).
 fn quat_rotate(q: vec4<f32>, v: vec3<f32>) -> vec3<f32> {
@@ -96,7 +95,7 @@ fn eye_direction(x: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(0.0, 0.0, 1.0);
 }
 
-@compute @workgroup_size(64, 1, 1)
+@compute @workgroup_size(WALK_LANES, 1, 1)
 fn walk_lights(
     @builtin(workgroup_id) group: vec3<u32>,
     @builtin(local_invocation_index) lane: u32,

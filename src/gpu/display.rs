@@ -19,11 +19,18 @@ use super::renderer::{compute_pipeline, read_buffer, GpuImage, WORKGROUP_SIDE};
 use super::shaders::{DISPLAY_MODULE, DISPLAY_STATS_MODULE};
 use crate::render::tonemap::ViewTransform;
 
-/// `view` of the clamp transform; keep in sync with
-/// `shaders/common/tonemap.wgsl`.
+/// `view` of the clamp transform (generated into the WGSL prelude, as are
+/// the other tags here).
 pub const VIEW_CLAMP: u32 = 0;
 /// `view` of the filmic transform.
 pub const VIEW_FILMIC: u32 = 1;
+
+/// `mode` of [`DisplayMode::Single`].
+pub const MODE_SINGLE: u32 = 0;
+/// `mode` of [`DisplayMode::Split`].
+pub const MODE_SPLIT: u32 = 1;
+/// `mode` of [`DisplayMode::Heat`].
+pub const MODE_HEAT: u32 = 2;
 
 /// The format of the display texture.
 pub const DISPLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -152,9 +159,13 @@ impl DisplayPass {
         settings: &DisplaySettings,
     ) -> GpuDisplayParams {
         let (mode, split_x, heat_scale) = match settings.mode {
-            DisplayMode::Single => (0, width, 1.0),
-            DisplayMode::Split(s) => (1, (s.clamp(0.0, 1.0) * width as f32).round() as u32, 1.0),
-            DisplayMode::Heat(scale) => (2, width, scale),
+            DisplayMode::Single => (MODE_SINGLE, width, 1.0),
+            DisplayMode::Split(s) => (
+                MODE_SPLIT,
+                (s.clamp(0.0, 1.0) * width as f32).round() as u32,
+                1.0,
+            ),
+            DisplayMode::Heat(scale) => (MODE_HEAT, width, scale),
         };
         GpuDisplayParams {
             width,

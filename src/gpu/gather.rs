@@ -1,6 +1,6 @@
 //! The final gather of the internal-lights method ([method §6](crate::doc::method)) on the
 //! GPU, both forms of `L₁` (the field form and the point lights,
-//! [`L1Form`], chosen in the uniform), with the internal lights built on
+//! [`L1Form`](crate::scene::L1Form), chosen in the uniform), with the internal lights built on
 //! the CPU ([`InternalLights::build`]) or on the GPU
 //! ([`super::walks::build_internal_lights_gpu`]) and uploaded once:
 //! positions and weights, the SH coefficients of
@@ -16,11 +16,10 @@
 //! written out in `shaders/common/internal_data.wgsl`.
 
 use super::context::{GpuContext, GpuError};
-use super::mirrors::{GpuGatherParams, CLOCK_GEOMETRIC, CLOCK_OPTICAL_DEPTH, L1_FIELD, L1_POINTS};
+use super::mirrors::GpuGatherParams;
 use super::renderer::{storage_buffer, GpuRenderer};
 use super::shaders::GATHER_MODULE;
-use crate::physics::gated_walk::Clock;
-use crate::physics::internal::{InternalLights, L1Form};
+use crate::physics::internal::InternalLights;
 use crate::render::Prepared;
 
 /// The cached lights packed for the GPU.
@@ -88,10 +87,7 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
         cluster_min: clusters.min().to_array(),
         sigma_grey: cache.sigma_grey,
         cluster_cell: clusters.cell_size().to_array(),
-        clock: match cache.params.clock {
-            Clock::Geometric => CLOCK_GEOMETRIC,
-            Clock::OpticalDepth => CLOCK_OPTICAL_DEPTH,
-        },
+        clock: cache.params.clock.tag(),
         cluster_res: clusters.resolution().to_array(),
         sh_order: cache.sh_order,
         sh_count: cache.sh_count as u32,
@@ -109,10 +105,7 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
         cluster_power_offset,
         light_power_offset,
         live_offset,
-        l1_form: match cache.params.l1 {
-            L1Form::Field => L1_FIELD,
-            L1Form::Points => L1_POINTS,
-        },
+        l1_form: cache.params.l1.tag(),
         scattered_offset,
         n_terms: cache.params.terms,
         unclamped: u32::from(cache.params.renewed),

@@ -20,14 +20,14 @@ use crate::physics::majorant::MajorantGrid;
 use crate::render::SceneVolume;
 use crate::scene::{CameraFrame, Density};
 
-/// Density-source tags (keep in sync with `DENSITY_*` in
-/// `shaders/common/scene.wgsl`).
+/// Density-source tags (generated into the WGSL prelude, as are all the
+/// tags here: `gpu::shaders::WGSL_CONSTANTS`).
 pub const DENSITY_SPHERE: u32 = 0;
 /// A box of density one.
 pub const DENSITY_BOX: u32 = 1;
 /// A voxel grid in the density texture.
 pub const DENSITY_GRID: u32 = 2;
-/// Light tags (keep in sync with `LIGHT_*` in `shaders/common/scene.wgsl`).
+/// Light tags (`LIGHT_*` in the WGSL prelude).
 pub const LIGHT_SUN: u32 = 0;
 /// A point light.
 pub const LIGHT_POINT: u32 = 1;
@@ -182,19 +182,6 @@ pub struct GpuLight {
     pub _pad0: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuLight>() == 32);
-
-/// Clock tags (keep in sync with `CLOCK_*` in
-/// `shaders/common/gated_walk.wgsl`).
-pub const CLOCK_GEOMETRIC: u32 = 0;
-/// The optical-depth clock.
-pub const CLOCK_OPTICAL_DEPTH: u32 = 1;
-
-/// Forms of the gather's `L₁` (keep in sync with `L1_*` in
-/// `shaders/common/internal_data.wgsl`): one scattering of the
-/// reconstructed field (`L1Form::Field`).
-pub const L1_FIELD: u32 = 0;
-/// The sum over the point lights (`L1Form::Points`).
-pub const L1_POINTS: u32 = 1;
 
 /// Constants of the cached internal lights and the offsets of their tables
 /// in the two packed buffers (see `gpu::gather`). Keep in sync with

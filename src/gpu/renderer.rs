@@ -21,8 +21,8 @@ use super::mirrors::{
 use super::shaders::{ModuleSource, REFERENCE_MODULE};
 use crate::render::{Film, Prepared};
 
-/// Workgroup side in pixels; keep in sync with `WORKGROUP_SIDE` in
-/// `shaders/common/camera.wgsl`.
+/// Workgroup side in pixels (the WGSL's `WORKGROUP_SIDE` is generated from
+/// it).
 pub const WORKGROUP_SIDE: u32 = 8;
 
 /// A compute pipeline built from one assembled module, with its bind-group

@@ -9,6 +9,13 @@
 //! binary needs no shader files at run time. The integration tests run naga
 //! over every assembled module and check that every `.wgsl` file under
 //! `shaders/` belongs to at least one of them.
+//!
+//! The constants and tags that Rust and WGSL share are not written in the
+//! shaders: [`WGSL_CONSTANTS`] lists them with the Rust items they come
+//! from, and [`ModuleSource::assemble`] puts them first in every module as
+//! WGSL `const` declarations ([`prelude`]), their floats written so that
+//! they read back to the same bits. A test fails if a `.wgsl` file declares
+//! one of them by hand.
 
 /// One WGSL file, embedded in the binary.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -86,6 +93,190 @@ pub const DISPLAY_MAIN: ShaderPart = part!("display/main.wgsl");
 pub const DISPLAY_IMAGE: ShaderPart = part!("display/image.wgsl");
 /// The display pass's statistics (reduction) entry point.
 pub const DISPLAY_STATS: ShaderPart = part!("display/stats.wgsl");
+
+/// The value of a constant of the WGSL prelude.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum WgslValue {
+    /// An `f32`.
+    F32(f32),
+    /// A `u32`.
+    U32(u32),
+    /// An `array<f32, N>`.
+    F32Array(&'static [f32]),
+}
+
+/// A constant that the shaders take from Rust: its WGSL name, its value and
+/// the Rust expression the value comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WgslConst {
+    /// The name the shaders use.
+    pub name: &'static str,
+    /// The value, read from the Rust item.
+    pub value: WgslValue,
+    /// The Rust expression (written into the prelude as a comment).
+    pub rust: &'static str,
+}
+
+/// A [`WgslConst`] of kind `$kind` named `$name`, from the Rust expression
+/// `$value` (whose text is kept as [`WgslConst::rust`]).
+macro_rules! shared {
+    ($name:literal, $kind:ident, $($value:tt)+) => {
+        WgslConst {
+            name: $name,
+            value: WgslValue::$kind($($value)+),
+            rust: stringify!($($value)+),
+        }
+    };
+}
+
+/// Every constant and tag that Rust and the WGSL share, generated into
+/// every module by [`prelude`]. The shaders must not declare these names
+/// themselves (a test checks every file under `shaders/`).
+pub const WGSL_CONSTANTS: &[WgslConst] = &[
+    // Scene data tags (`gpu/mirrors.rs`, `shaders/common/scene.wgsl`).
+    shared!("DENSITY_SPHERE", U32, crate::gpu::mirrors::DENSITY_SPHERE),
+    shared!("DENSITY_BOX", U32, crate::gpu::mirrors::DENSITY_BOX),
+    shared!("DENSITY_GRID", U32, crate::gpu::mirrors::DENSITY_GRID),
+    shared!("LIGHT_SUN", U32, crate::gpu::mirrors::LIGHT_SUN),
+    shared!("LIGHT_POINT", U32, crate::gpu::mirrors::LIGHT_POINT),
+    shared!("ENV_NONE", U32, crate::gpu::mirrors::ENV_NONE),
+    shared!("ENV_CONSTANT", U32, crate::gpu::mirrors::ENV_CONSTANT),
+    shared!("ENV_MAP", U32, crate::gpu::mirrors::ENV_MAP),
+    // The settings' enums (`scene/settings.rs`).
+    shared!("CLOCK_GEOMETRIC", U32, crate::scene::Clock::Geometric.tag()),
+    shared!(
+        "CLOCK_OPTICAL_DEPTH",
+        U32,
+        crate::scene::Clock::OpticalDepth.tag()
+    ),
+    shared!("L1_FIELD", U32, crate::scene::L1Form::Field.tag()),
+    shared!("L1_POINTS", U32, crate::scene::L1Form::Points.tag()),
+    // The display pass (`gpu/display.rs`).
+    shared!("VIEW_CLAMP", U32, crate::gpu::display::VIEW_CLAMP),
+    shared!("VIEW_FILMIC", U32, crate::gpu::display::VIEW_FILMIC),
+    shared!("MODE_SINGLE", U32, crate::gpu::display::MODE_SINGLE),
+    shared!("MODE_SPLIT", U32, crate::gpu::display::MODE_SPLIT),
+    shared!("MODE_HEAT", U32, crate::gpu::display::MODE_HEAT),
+    // Workgroup sizes the dispatches count with.
+    shared!("WORKGROUP_SIDE", U32, crate::gpu::renderer::WORKGROUP_SIDE),
+    shared!("WALK_LANES", U32, crate::gpu::walks::WALK_LANES),
+    shared!("PLACEMENT_LANES", U32, crate::gpu::walks::PLACEMENT_LANES),
+    // The walks' private array of gates, `N + 1` for the largest `N`.
+    shared!("GPU_MAX_GATES", U32, crate::gpu::walks::GPU_MAX_TERMS + 1),
+    // Random stream tags.
+    shared!(
+        "PLACEMENT_PASS",
+        U32,
+        crate::physics::placement::PLACEMENT_PASS
+    ),
+    shared!("WALK_PASS", U32, crate::physics::internal::WALK_PASS),
+    // The estimators' constants.
+    shared!("PI", F32, std::f32::consts::PI),
+    shared!(
+        "HG_ISOTROPIC_EPS",
+        F32,
+        crate::physics::phase::ISOTROPIC_EPS
+    ),
+    shared!("MIN_DIST2", F32, crate::physics::lights::MIN_DIST2),
+    shared!("FAR_LIGHT", F32, crate::physics::lights::FAR_LIGHT),
+    shared!(
+        "RR_START_DEPTH",
+        U32,
+        crate::physics::reference::RR_START_DEPTH
+    ),
+    shared!("SH_MAX_ORDER", U32, crate::physics::sh::MAX_ORDER),
+    shared!("SH_NORM", F32Array, &crate::physics::sh::NORM),
+    shared!(
+        "CLOCK_SPLIT_WINDOW",
+        F32,
+        crate::physics::gated_walk::CLOCK_SPLIT_WINDOW
+    ),
+    shared!(
+        "CLOCK_MAX_STEPS",
+        F32,
+        crate::physics::gated_walk::CLOCK_MAX_STEPS
+    ),
+    shared!(
+        "COLLISION_FLOOR",
+        F32,
+        crate::physics::gated_walk::COLLISION_FLOOR
+    ),
+    shared!(
+        "COLLISION_DEPTH",
+        F32,
+        crate::physics::gated_walk::COLLISION_DEPTH
+    ),
+    shared!(
+        "GUIDED_COLLISIONS",
+        U32,
+        crate::physics::gated_walk::GUIDED_COLLISIONS
+    ),
+    shared!(
+        "GUIDE_PROBABILITY",
+        F32,
+        crate::physics::gated_walk::GUIDE_PROBABILITY
+    ),
+    shared!("GUIDE_G", F32, crate::physics::gated_walk::GUIDE_G),
+    shared!("GOLDEN_ANGLE", F32, crate::physics::internal::GOLDEN_ANGLE),
+    shared!("TRACKING_RATE", F32, crate::physics::gather::TRACKING_RATE),
+    shared!(
+        "SEGMENT_PIECES",
+        U32,
+        crate::physics::segment_pdf::PIECES as u32
+    ),
+    shared!(
+        "SEGMENT_DEFENSIVE",
+        F32,
+        crate::physics::segment_pdf::DEFENSIVE
+    ),
+];
+
+/// The first line of [`prelude`].
+const PRELUDE_HEADER: &str = "// ---- generated from Rust: gpu::shaders::WGSL_CONSTANTS ----\n";
+
+/// What [`ModuleSource::locate`] names the generated prelude's lines by.
+pub const PRELUDE_PATH: &str = "<generated prelude>";
+
+/// A WGSL literal of `x` that reads back to the same `f32`: WGSL reads an
+/// unsuffixed literal as an abstract (f64) float and then rounds it to
+/// `f32`, so the shortest decimal of `x` is used when that double rounding
+/// returns `x`, and otherwise the shortest decimal of `x` widened to `f64`
+/// (exact in `f64`, so it rounds back exactly).
+pub fn wgsl_f32(x: f32) -> String {
+    let short = format!("{x:?}");
+    match short.parse::<f64>() {
+        Ok(v) if (v as f32).to_bits() == x.to_bits() => short,
+        _ => format!("{:?}", f64::from(x)),
+    }
+}
+
+/// The WGSL declaration of one constant, on one line.
+fn declaration(c: &WgslConst) -> String {
+    let value = match c.value {
+        WgslValue::F32(x) => format!("const {}: f32 = {};", c.name, wgsl_f32(x)),
+        WgslValue::U32(x) => format!("const {}: u32 = {x}u;", c.name),
+        WgslValue::F32Array(xs) => {
+            let items: Vec<String> = xs.iter().map(|&x| wgsl_f32(x)).collect();
+            format!(
+                "const {}: array<f32, {n}> = array<f32, {n}>({});",
+                c.name,
+                items.join(", "),
+                n = xs.len()
+            )
+        }
+    };
+    format!("{value} // {}\n", c.rust)
+}
+
+/// The WGSL declarations of [`WGSL_CONSTANTS`], one line each after a
+/// header line: the start of every assembled module.
+pub fn prelude() -> String {
+    let mut out = String::from(PRELUDE_HEADER);
+    for c in WGSL_CONSTANTS {
+        out.push_str(&declaration(c));
+    }
+    out
+}
 
 /// A shader module: a name and its parts in dependency order.
 #[derive(Clone, Copy, Debug)]
@@ -188,10 +379,10 @@ pub const MODULES: &[ModuleSource] = &[
 ];
 
 impl ModuleSource {
-    /// The module's WGSL text: its parts concatenated, each preceded by a
-    /// comment naming its file.
+    /// The module's WGSL text: the [`prelude`], then its parts
+    /// concatenated, each preceded by a comment naming its file.
     pub fn assemble(&self) -> String {
-        let mut out = String::new();
+        let mut out = prelude();
         for p in self.parts {
             out.push_str("// ---- shaders/");
             out.push_str(p.path);
@@ -205,9 +396,15 @@ impl ModuleSource {
     }
 
     /// The part (file) and line within it of `line` (1-based) of
-    /// [`ModuleSource::assemble`]'s text, for error messages.
+    /// [`ModuleSource::assemble`]'s text, for error messages; the
+    /// prelude's constants are named [`PRELUDE_PATH`] and counted from 1.
     pub fn locate(&self, line: usize) -> Option<(&'static str, usize)> {
+        // The prelude: one header line, then one line per constant.
         let mut start = 1;
+        if line > start && line <= start + WGSL_CONSTANTS.len() {
+            return Some((PRELUDE_PATH, line - start));
+        }
+        start += WGSL_CONSTANTS.len() + 1;
         for p in self.parts {
             // One header line, then the part's lines.
             let lines = p.source.lines().count();
@@ -223,73 +420,148 @@ impl ModuleSource {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::collections::HashSet;
+    use std::path::Path;
 
     #[test]
     fn locate_maps_assembled_lines_to_files() {
         let m = REFERENCE_MODULE;
         let text = m.assemble();
         let lines: Vec<&str> = text.lines().collect();
+        let prelude_lines = WGSL_CONSTANTS.len() + 1;
         // The first line of the second part.
-        let first = m.parts[0].source.lines().count() + 3;
+        let first = prelude_lines + m.parts[0].source.lines().count() + 3;
         assert_eq!(m.locate(first), Some((m.parts[1].path, 1)));
         assert_eq!(lines[first - 1], m.parts[1].source.lines().next().unwrap());
+        // The header lines, and the prelude's first constant.
         assert_eq!(m.locate(1), None);
+        assert_eq!(m.locate(prelude_lines + 1), None);
+        assert_eq!(m.locate(2), Some((PRELUDE_PATH, 1)));
+        assert!(lines[1].starts_with(&format!("const {}:", WGSL_CONSTANTS[0].name)));
     }
 
-    /// The value of `const NAME: TYPE = VALUE;` in `part`, as a number.
-    fn wgsl_const(part: ShaderPart, name: &str) -> f64 {
-        let key = format!("const {name}:");
-        let line = part
-            .source
-            .lines()
-            .find(|l| l.trim_start().starts_with(&key))
-            .unwrap_or_else(|| panic!("{} has no {name}", part.path));
-        let value = line.split('=').nth(1).unwrap().trim().trim_end_matches(';');
-        value.trim_end_matches('u').parse().unwrap()
-    }
-
-    /// The constants that the WGSL estimators repeat agree with the CPU's.
     #[test]
-    fn wgsl_constants_mirror_the_cpu() {
-        use crate::physics::{gated_walk, gather, segment_pdf};
-        let pairs = [
-            (GATHER, "TRACKING_RATE", gather::TRACKING_RATE as f64),
-            (GATHER, "SEGMENT_PIECES", segment_pdf::PIECES as f64),
-            (GATHER, "SEGMENT_DEFENSIVE", segment_pdf::DEFENSIVE as f64),
-            (
-                GATED_WALK,
-                "COLLISION_FLOOR",
-                gated_walk::COLLISION_FLOOR as f64,
-            ),
-            (
-                GATED_WALK,
-                "COLLISION_DEPTH",
-                gated_walk::COLLISION_DEPTH as f64,
-            ),
-            (
-                GATED_WALK,
-                "GUIDE_PROBABILITY",
-                gated_walk::GUIDE_PROBABILITY as f64,
-            ),
-            (GATED_WALK, "GUIDE_G", gated_walk::GUIDE_G as f64),
-            (
-                GATED_WALK,
-                "CLOCK_MAX_STEPS",
-                gated_walk::CLOCK_MAX_STEPS as f64,
-            ),
-            (
-                GATED_WALK,
-                "GUIDED_COLLISIONS",
-                gated_walk::GUIDED_COLLISIONS as f64,
-            ),
-        ];
-        for (part, name, cpu) in pairs {
-            let gpu = wgsl_const(part, name);
-            assert!(
-                (gpu - cpu).abs() <= 1e-6 * cpu.abs(),
-                "{}: {name} = {gpu}, the CPU's is {cpu}",
-                part.path
-            );
+    fn generated_names_are_unique() {
+        let mut seen = HashSet::new();
+        for c in WGSL_CONSTANTS {
+            assert!(seen.insert(c.name), "{} is generated twice", c.name);
         }
+    }
+
+    /// Every float of the prelude reads back to the Rust value's bits, as
+    /// WGSL reads it (an abstract float rounded to `f32`) and as `f32`.
+    #[test]
+    fn generated_floats_round_trip() {
+        let floats = WGSL_CONSTANTS.iter().flat_map(|c| match c.value {
+            WgslValue::F32(x) => vec![(c.name, x)],
+            WgslValue::F32Array(xs) => xs.iter().map(|&x| (c.name, x)).collect(),
+            WgslValue::U32(_) => vec![],
+        });
+        for (name, x) in floats {
+            assert!(x.is_finite(), "{name}: {x} has no WGSL literal");
+            let lit = wgsl_f32(x);
+            assert!(lit.contains(['.', 'e']), "{name}: {lit} is not a float");
+            let back = lit.parse::<f64>().unwrap() as f32;
+            assert_eq!(back.to_bits(), x.to_bits(), "{name}: {lit}");
+            assert_eq!(lit.parse::<f32>().unwrap().to_bits(), x.to_bits());
+        }
+        // A value whose shortest decimal would round twice is still exact.
+        for bits in [0x3e99_999a_u32, 0x3f80_0001, 0x0000_0001, 0x7f7f_ffff] {
+            let x = f32::from_bits(bits);
+            assert_eq!((wgsl_f32(x).parse::<f64>().unwrap() as f32).to_bits(), bits);
+        }
+    }
+
+    /// naga reads the prelude's constants back to the Rust values.
+    #[test]
+    fn naga_reads_the_prelude_back() {
+        use naga::{Expression, Literal};
+        let text = prelude();
+        let module = naga::front::wgsl::parse_str(&text).unwrap();
+        let literal = |h: naga::Handle<Expression>| match module.global_expressions[h] {
+            Expression::Literal(Literal::F32(x)) => WgslValue::F32(x),
+            Expression::Literal(Literal::U32(x)) => WgslValue::U32(x),
+            ref e => panic!("not a literal: {e:?}"),
+        };
+        for c in WGSL_CONSTANTS {
+            let (_, k) = module
+                .constants
+                .iter()
+                .find(|(_, k)| k.name.as_deref() == Some(c.name))
+                .unwrap_or_else(|| panic!("{} is not in the prelude", c.name));
+            match (c.value, &module.global_expressions[k.init]) {
+                (WgslValue::F32Array(xs), Expression::Compose { components, .. }) => {
+                    let got: Vec<WgslValue> = components.iter().map(|&h| literal(h)).collect();
+                    let want: Vec<WgslValue> = xs.iter().map(|&x| WgslValue::F32(x)).collect();
+                    assert_eq!(got, want, "{}", c.name);
+                }
+                (WgslValue::F32(x), _) => {
+                    let WgslValue::F32(y) = literal(k.init) else {
+                        panic!("{} is not an f32", c.name)
+                    };
+                    assert_eq!(x.to_bits(), y.to_bits(), "{}", c.name);
+                }
+                (v, _) => assert_eq!(literal(k.init), v, "{}", c.name),
+            }
+        }
+    }
+
+    fn wgsl_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                wgsl_files(&path, out);
+            } else if path.extension().is_some_and(|e| e == "wgsl") {
+                out.push(path);
+            }
+        }
+    }
+
+    /// No shader writes by hand a constant that the prelude generates from
+    /// Rust (it would fail to compile as a redefinition, or, in a file of
+    /// no module, drift silently).
+    #[test]
+    fn no_shader_declares_a_generated_constant() {
+        let generated: HashSet<&str> = WGSL_CONSTANTS.iter().map(|c| c.name).collect();
+        let mut files = Vec::new();
+        wgsl_files(
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders"),
+            &mut files,
+        );
+        assert!(files.len() >= MODULES.iter().map(|m| m.parts.len()).max().unwrap());
+        let mut found = Vec::new();
+        for f in &files {
+            let text = std::fs::read_to_string(f).unwrap();
+            for (i, line) in text.lines().enumerate() {
+                let line = line.trim_start();
+                let Some(rest) = ["const ", "override ", "alias ", "var<private> "]
+                    .iter()
+                    .find_map(|k| line.strip_prefix(k))
+                else {
+                    continue;
+                };
+                let name: String = rest
+                    .trim_start()
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                if generated.contains(name.as_str()) {
+                    found.push(format!("{}:{}: {name}", f.display(), i + 1));
+                }
+            }
+        }
+        assert!(
+            found.is_empty(),
+            "constants generated from Rust (gpu::shaders::WGSL_CONSTANTS) declared by hand:\n{}",
+            found.join("\n")
+        );
+    }
+
+    /// The prelude itself, for inspection (`--nocapture`).
+    #[test]
+    fn prelude_is_one_line_per_constant() {
+        let text = prelude();
+        assert_eq!(text.lines().count(), WGSL_CONSTANTS.len() + 1);
+        println!("{text}");
     }
 }

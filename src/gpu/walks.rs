@@ -36,12 +36,9 @@ use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use super::context::{GpuContext, GpuError};
-use super::mirrors::{
-    GpuPassParams, GpuPlacementParams, GpuWalkParams, CLOCK_GEOMETRIC, CLOCK_OPTICAL_DEPTH,
-};
+use super::mirrors::{GpuPassParams, GpuPlacementParams, GpuWalkParams};
 use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
-use crate::physics::gated_walk::Clock;
 use crate::physics::internal::{
     kernel_radius_for, place_internal_lights, within_view_reach, InternalLight, InternalLights,
     InternalParams, LightSources,
@@ -50,17 +47,17 @@ use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::sh::{sh_count, MAX_ORDER};
 use crate::render::Prepared;
 
-/// Invocations per workgroup of the walks, one walk each per dispatch;
-/// keep in sync with `WALK_LANES` in `shaders/walks/main.wgsl`.
+/// Invocations per workgroup of the walks, one walk each per dispatch (the
+/// WGSL's `WALK_LANES` is generated from it).
 pub const WALK_LANES: u32 = 64;
 
-/// Invocations per workgroup of the placement; keep in sync with
-/// `@workgroup_size` in `shaders/placement/main.wgsl`.
-const PLACEMENT_LANES: u32 = 64;
+/// Invocations per workgroup of the placement (the WGSL's
+/// `PLACEMENT_LANES`, its `@workgroup_size`, is generated from it).
+pub const PLACEMENT_LANES: u32 = 64;
 
 /// The largest series truncation `N` the GPU walks support: each
-/// invocation keeps its walk's `N + 1` terms in a private array (keep in
-/// sync with `GPU_MAX_GATES − 1` in `shaders/common/gated_walk.wgsl`).
+/// invocation keeps its walk's `N + 1` terms in a private array (the
+/// WGSL's `GPU_MAX_GATES` is generated as this plus one).
 pub const GPU_MAX_TERMS: u32 = 256;
 
 /// One vec4 of a GPU buffer, read back.
@@ -387,10 +384,7 @@ fn walk(
     let mut walk_params = GpuWalkParams {
         s_star: params.s_star,
         n_terms: params.terms,
-        clock: match params.clock {
-            Clock::Geometric => CLOCK_GEOMETRIC,
-            Clock::OpticalDepth => CLOCK_OPTICAL_DEPTH,
-        },
+        clock: params.clock.tag(),
         rr_start: RR_START_DEPTH,
         walks,
         sh_order: order,

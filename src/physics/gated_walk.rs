@@ -89,15 +89,9 @@ use super::rng::{pcg_hash, Rng};
 use super::tracking::{free_flight, spectral_event, TentativeEvent, TentativeSteps};
 use super::volume::{DensityField, Volume};
 
-/// What the walk's clock counts between gates.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Clock {
-    /// Geometric path length `ℓ`: gates at `ℓ = k s*` (the note's choice).
-    Geometric,
-    /// Grey optical depth `τ = ∫ max(σ_t) ρ dℓ`: gates at `τ = k s*`, so
-    /// that each window holds on average `s*` collisions ([method §7](crate::doc::method)).
-    OpticalDepth,
-}
+/// What the walk's clock counts between gates: the settings' enum, one
+/// for the scene file, the command line, the estimators and the GPU.
+pub use crate::scene::settings::Clock;
 
 /// Parameters of the time-gated walk.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -132,12 +126,13 @@ pub fn clock_rate<D: DensityField>(vol: &Volume<D>, clock: Clock, p: Vec3) -> f3
 }
 
 /// The largest majorant optical depth of one step of the optical-depth
-/// clock's quadrature, as a fraction of the window `s*`.
-const CLOCK_SPLIT_WINDOW: f32 = 0.25;
+/// clock's quadrature, as a fraction of the window `s*` (the WGSL's is
+/// generated from it).
+pub const CLOCK_SPLIT_WINDOW: f32 = 0.25;
 
 /// The most quadrature steps of the optical-depth clock in one majorant
 /// cell (a bound on the work per cell in media far denser than the window;
-/// mirrored in `shaders/common/gated_walk.wgsl`).
+/// the WGSL's is generated from it).
 pub const CLOCK_MAX_STEPS: f32 = 64.0;
 
 /// The smallest extent of a majorant cell: the optical-depth clock's
@@ -465,12 +460,12 @@ pub fn collided(out: &[Vec3], unscattered: &[Vec3]) -> Vec3 {
 }
 
 /// The optical depth past which [`collision_probability`] stops marching
-/// and returns one (`1 − e^{−12}` differs from it by 6e-6; mirrored in
-/// `shaders/common/gated_walk.wgsl`).
+/// and returns one (`1 − e^{−12}` differs from it by 6e-6; the WGSL's is
+/// generated from it).
 pub const COLLISION_DEPTH: f32 = 12.0;
 
-/// The least [`collision_probability`] returns (mirrored in
-/// `shaders/common/gated_walk.wgsl`).
+/// The least [`collision_probability`] returns (the WGSL's is generated
+/// from it).
 pub const COLLISION_FLOOR: f32 = 0.05;
 
 /// Advances `clock` (gating windows of `s_star`) along `origin + t dir`

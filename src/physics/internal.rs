@@ -93,8 +93,8 @@ use super::view_placement::{knn_kernel_radius, place_in_view, ViewFrame};
 use super::volume::{DensityField, Volume};
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) of the walks, apart
-/// from the placement's and the renders' (keep in sync with `WALK_PASS` in
-/// `shaders/walks/main.wgsl`).
+/// from the placement's and the renders' (the WGSL's `WALK_PASS` is
+/// generated from it).
 pub const WALK_PASS: u32 = 0x7761_6c6b;
 
 /// Stream index of the sky's light arriving at each internal light
@@ -120,17 +120,10 @@ const LIGHTS_PER_CLUSTER: f32 = 24.0;
 /// Most clusters along an axis.
 const MAX_CLUSTER_RES: u32 = 12;
 
-/// The form of the final gather's `L₁` (see [`super::gather`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum L1Form {
-    /// One scattering of the reconstructed field `J = S₁ + Ĵ`: no bounded
-    /// kernel, so no softening bias.
-    #[default]
-    Field,
-    /// The note's sum over the point lights with the bounded kernel
-    /// `1/(r² + h₁²)`.
-    Points,
-}
+/// The form of the final gather's `L₁` (see [`super::gather`]): the
+/// settings' enum, one for the scene file, the command line, the
+/// estimators and the GPU.
+pub use crate::scene::settings::L1Form;
 
 /// Parameters of the internal lights, resolved (no defaults left open).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -1259,7 +1252,7 @@ impl InternalLights {
 }
 
 /// `π (3 − √5)`, the golden angle of the spherical Fibonacci lattice.
-const GOLDEN_ANGLE: f32 = 2.399_963;
+pub const GOLDEN_ANGLE: f32 = 2.399_963;
 
 /// A uniformly random rotation (Shoemake's uniform unit quaternion).
 fn random_rotation(rng: &mut Rng) -> glam::Quat {

@@ -52,7 +52,7 @@ pub struct LightSample {
 }
 
 /// Smallest squared distance to a point light, so that `1/r²` stays finite.
-const MIN_DIST2: f32 = 1e-8;
+pub const MIN_DIST2: f32 = 1e-8;
 
 /// Beyond this offset along an axis a point light is "far": `|v|²` could
 /// overflow `f32` (`(10¹⁹)² = 10³⁸` of `3.4·10³⁸`), so its distance and

@@ -13,7 +13,7 @@ use glam::Vec3;
 use super::frame;
 
 /// Below this |g| the function is treated as isotropic when sampling.
-const ISOTROPIC_EPS: f32 = 1e-3;
+pub const ISOTROPIC_EPS: f32 = 1e-3;
 
 /// `P(μ)` in 1/sr.
 #[inline]

@@ -42,8 +42,8 @@ use super::rng::Rng;
 use super::volume::DensityField;
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) used for placement, so
-/// that it does not share numbers with renders using the same seed (keep in
-/// sync with `PLACEMENT_PASS` in `shaders/common/placement.wgsl`).
+/// that it does not share numbers with renders using the same seed (the
+/// WGSL's `PLACEMENT_PASS` is generated from it).
 pub const PLACEMENT_PASS: u32 = 0x706c_6163;
 
 /// One internal light's position and the volume it stands for.

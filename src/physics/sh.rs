@@ -29,7 +29,7 @@ pub const MAX_COUNT: usize = ((MAX_ORDER + 1) * (MAX_ORDER + 1)) as usize;
 
 /// `K_l^|m|` (times `√2` for `m ≠ 0`), indexed by `l(l+1) + m`; checked
 /// against the factorial formula in the tests.
-const NORM: [f32; MAX_COUNT] = [
+pub const NORM: [f32; MAX_COUNT] = [
     0.282_094_8,   // l=0, m=0
     0.488_602_5,   // l=1, m=-1
     0.488_602_5,   // l=1, m=0

@@ -9,16 +9,14 @@ use std::sync::{Arc, Mutex, PoisonError};
 use glam::Vec3;
 
 use crate::physics::environment::{EnvMap, Environment, EnvironmentKind};
-use crate::physics::gated_walk::Clock;
-use crate::physics::internal::{placement_density, InternalLights, InternalParams, L1Form};
+use crate::physics::internal::{placement_density, InternalLights, InternalParams};
 use crate::physics::lights::{Lights, PointLight, Sun};
 use crate::physics::placement::PlacementDensity;
 use crate::physics::view_placement::ViewFrame;
 use crate::physics::volume::{DensityField, Optics, Volume};
 use crate::scene::settings::DEFAULT_S_STAR;
 use crate::scene::{
-    CameraFrame, ClockKind, Density, L1Kind, Light, LoadedSky, RenderSettings, Scene, SceneError,
-    Sky,
+    CameraFrame, Clock, Density, Light, LoadedSky, RenderSettings, Scene, SceneError, Sky,
 };
 
 /// Majorant cells along the longest axis of the medium's box.
@@ -415,10 +413,7 @@ pub fn internal_params_for_set(
     set: u32,
 ) -> InternalParams {
     let s = &settings.internal;
-    let clock = match s.clock {
-        ClockKind::Geometric => Clock::Geometric,
-        ClockKind::OpticalDepth => Clock::OpticalDepth,
-    };
+    let clock = s.clock;
     let s_star = s
         .s_star
         .unwrap_or_else(|| default_s_star(&prepared.volume, clock));
@@ -431,10 +426,7 @@ pub fn internal_params_for_set(
         kernel_radius: s.kernel_radius,
         uniform_mix: s.uniform_mix,
         clock,
-        l1: match s.l1 {
-            L1Kind::Field => L1Form::Field,
-            L1Kind::Points => L1Form::Points,
-        },
+        l1: s.l1,
         window_scatters: s.window_scatters,
         view_walks: s.view_walks,
         // Only the view walks tie the lights to the camera: without them

@@ -28,7 +28,9 @@ pub use error::SceneError;
 pub use grid::VoxelGrid;
 pub use light::Light;
 pub use medium::{CloudParams, DensitySource, GridFormat, GridSource, Medium};
-pub use settings::{ClockKind, InternalSettings, L1Kind, Method, Quality, RenderSettings};
+pub use settings::{
+    Clock, ClockKind, InternalSettings, L1Form, L1Kind, Method, Quality, RenderSettings,
+};
 
 /// Largest image side accepted, in pixels.
 pub const MAX_IMAGE_SIDE: u32 = 16384;

@@ -4,40 +4,82 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Which estimator renders the image.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+/// Which estimator renders the image: the one enum that the scene file
+/// (`method: Reference`), the command line (`--method reference`) and the
+/// previewer's streams use. The discriminants index the previewer's
+/// per-estimator tables.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum,
+)]
 pub enum Method {
     /// The unbiased volumetric path tracer ([method §2](crate::doc::method)): the ground truth.
     #[default]
-    Reference,
+    #[value(help = "The unbiased volumetric path tracer")]
+    Reference = 1,
     /// Multiple scatter as internal lights ([method §3–§6](crate::doc::method)).
-    Internal,
+    #[value(help = "Multiple scatter as internal lights")]
+    Internal = 0,
 }
 
 /// What the path-length clock of the internal-lights method counts
-/// ([method §3, §7](crate::doc::method)).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub enum ClockKind {
-    /// Geometric path length, as in Tessendorf's note: `s*` is a distance.
-    Geometric,
-    /// Optical depth `∫ max(σ_t) ρ dℓ`: `s*` is a number of mean free
-    /// paths, so every window holds on average `s*` collisions.
+/// between the walks' gates ([method §3, §7](crate::doc::method)): the one
+/// enum that the scene file (`clock: OpticalDepth`), the command line
+/// (`--clock optical-depth`), the estimators (`physics::gated_walk`
+/// re-exports it) and the GPU ([`Clock::tag`]) use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+pub enum Clock {
+    /// Geometric path length `ℓ`, as in Tessendorf's note: gates at
+    /// `ℓ = k s*`, `s*` is a distance.
+    #[value(help = "Geometric path length (`s*` is a distance)")]
+    Geometric = 0,
+    /// Grey optical depth `τ = ∫ max(σ_t) ρ dℓ`: gates at `τ = k s*`, so
+    /// `s*` is a number of mean free paths and every window holds on
+    /// average `s*` collisions.
     #[default]
-    OpticalDepth,
+    #[value(help = "Optical depth (`s*` is a number of mean free paths)")]
+    OpticalDepth = 1,
+}
+
+impl Clock {
+    /// The tag the shaders switch on (`CLOCK_*` in the generated WGSL
+    /// prelude, `gpu::shaders::WGSL_CONSTANTS`).
+    pub const fn tag(self) -> u32 {
+        self as u32
+    }
 }
 
 /// The form of the final gather's single-scatter term `L₁` ([method §6](crate::doc::method);
-/// §6.3 there says how they differ).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub enum L1Kind {
-    /// One scattering of the kernel-reconstructed field `J` (no bounded
-    /// kernel, no softening bias).
+/// §6.3 there says how they differ): the one enum that the scene file
+/// (`l1: Field`), the command line (`--l1 field`), the estimators
+/// (`physics::internal` re-exports it) and the GPU ([`L1Form::tag`]) use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+pub enum L1Form {
+    /// One scattering of the kernel-reconstructed field `J = S₁ + Ĵ` (no
+    /// bounded kernel, so no softening bias).
     #[default]
-    Field,
+    #[value(help = "One scattering of the reconstructed field J (default)")]
+    Field = 0,
     /// Tessendorf's sum over the point lights with the bounded kernel
     /// `1/(r² + h₁²)`.
-    Points,
+    #[value(help = "The note's sum over point lights with a bounded kernel")]
+    Points = 1,
 }
+
+impl L1Form {
+    /// The tag the shaders switch on (`L1_*` in the generated WGSL
+    /// prelude, `gpu::shaders::WGSL_CONSTANTS`).
+    pub const fn tag(self) -> u32 {
+        self as u32
+    }
+}
+
+/// The scene's former name of [`Clock`], kept for the previewer's code
+/// until it is renamed there (the same type, not a second enum).
+pub type ClockKind = Clock;
+
+/// The scene's former name of [`L1Form`], kept for the previewer's code
+/// until it is renamed there (the same type, not a second enum).
+pub type L1Kind = L1Form;
 
 /// Parameters of the internal-lights method. Changing any of them
 /// re-samples the internal lights.
@@ -72,9 +114,9 @@ pub struct InternalSettings {
     /// Uniform fraction `u` of the placement density.
     pub uniform_mix: f32,
     /// What the path-length clock counts.
-    pub clock: ClockKind,
+    pub clock: Clock,
     /// The form of the gather's `L₁`.
-    pub l1: L1Kind,
+    pub l1: L1Form,
     /// Scatterings inside the final window that the field form of `L₁`
     /// follows: 1 is the note's single-scatter kernel ([method §6](crate::doc::method)), 2
     /// and 3 add the next terms of the window's transport ([method
@@ -143,8 +185,8 @@ impl Quality {
             sh_order: 3,
             kernel_radius: None,
             uniform_mix: 0.0,
-            clock: ClockKind::OpticalDepth,
-            l1: L1Kind::Field,
+            clock: Clock::OpticalDepth,
+            l1: L1Form::Field,
             window_scatters: 2,
             view_walks: 16,
             light_samples: 4,
@@ -196,9 +238,9 @@ struct InternalSettingsFile {
     #[serde(deserialize_with = "given")]
     uniform_mix: Option<f32>,
     #[serde(deserialize_with = "given")]
-    clock: Option<ClockKind>,
+    clock: Option<Clock>,
     #[serde(deserialize_with = "given")]
-    l1: Option<L1Kind>,
+    l1: Option<L1Form>,
     #[serde(deserialize_with = "given")]
     window_scatters: Option<u32>,
     #[serde(deserialize_with = "given")]

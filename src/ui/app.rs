@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use eframe::egui;
 use serde::{Deserialize, Serialize};
 
-use super::backend::{Backend, Estimator, Job, Worker};
+use super::backend::{Backend, Job, Worker};
 use super::files::{self, Loaded};
 use super::viewport::{Display, NavState};
 use super::LaunchOptions;
@@ -44,12 +44,12 @@ pub enum CompareMode {
 
 impl CompareMode {
     /// The estimators the worker must run for this mode.
-    pub fn estimators(self) -> Vec<Estimator> {
+    pub fn estimators(self) -> Vec<Method> {
         match self {
-            CompareMode::Internal => vec![Estimator::Internal],
-            CompareMode::Reference => vec![Estimator::Reference],
+            CompareMode::Internal => vec![Method::Internal],
+            CompareMode::Reference => vec![Method::Reference],
             CompareMode::Split | CompareMode::Error => {
-                vec![Estimator::Internal, Estimator::Reference]
+                vec![Method::Internal, Method::Reference]
             }
         }
     }

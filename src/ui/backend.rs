@@ -45,15 +45,6 @@ use crate::scene::{Density, DensitySource, Method, Scene};
 
 pub use crate::scene::{ClockKind, InternalSettings};
 
-/// Which estimator a stream of passes uses, as the UI sees it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Estimator {
-    /// Multiple scatter as internal lights.
-    Internal = 0,
-    /// The unbiased path tracer.
-    Reference = 1,
-}
-
 /// Where the passes run.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Backend {
@@ -83,7 +74,7 @@ pub struct Job {
     /// Folder that grid paths are relative to.
     pub scene_dir: PathBuf,
     /// One stream per estimator to show (two for the comparisons).
-    pub estimators: Vec<Estimator>,
+    pub estimators: Vec<Method>,
     /// Stop after this many samples per pixel.
     pub max_spp: u32,
     /// Where to render (the GPU only where the worker has a device).
@@ -186,7 +177,7 @@ impl LightsView {
 #[derive(Clone, Debug)]
 pub struct StreamImage {
     /// The estimator.
-    pub estimator: Estimator,
+    pub estimator: Method,
     /// Width in pixels.
     pub width: u32,
     /// Height in pixels.
@@ -509,12 +500,9 @@ impl LightsCache {
 }
 
 /// The settings of one stream: the job's, with its estimator.
-fn settings_for(job: &Job, estimator: Estimator) -> crate::scene::RenderSettings {
+fn settings_for(job: &Job, estimator: Method) -> crate::scene::RenderSettings {
     let mut settings = job.scene.render.clone();
-    settings.method = match estimator {
-        Estimator::Internal => Method::Internal,
-        Estimator::Reference => Method::Reference,
-    };
+    settings.method = estimator;
     settings
 }
 
@@ -698,7 +686,7 @@ impl JobContext<'_> {
         // The internal lights, from the cache when only the camera changed.
         // Otherwise a coarse set (few lights, few walks) is built first, so
         // that a first image appears at once while the full set builds.
-        let wants_internal = job.estimators.contains(&Estimator::Internal);
+        let wants_internal = job.estimators.contains(&Method::Internal);
         let key = LightsCache::key_of(job);
         let cached = if lights_cache.key.as_ref() == Some(&key) {
             lights_cache.lights.clone()
@@ -722,7 +710,7 @@ impl JobContext<'_> {
             }
             Some(lights)
         } else {
-            let settings = settings_for(job, Estimator::Internal);
+            let settings = settings_for(job, Method::Internal);
             let mut coarse_settings = settings.clone();
             coarse_settings.internal.lights = settings.internal.lights.min(COARSE_LIGHTS);
             coarse_settings.internal.walks = settings.internal.walks.min(COARSE_WALKS);
@@ -762,7 +750,7 @@ impl JobContext<'_> {
         let shares = wants_internal.then(|| {
             Arc::new(Renderer::with_lights(
                 prepared.clone(),
-                &settings_for(job, Estimator::Internal),
+                &settings_for(job, Method::Internal),
                 lights.clone(),
             ))
         });
@@ -784,12 +772,12 @@ impl JobContext<'_> {
             }
         }
 
-        let engines: Vec<(Estimator, Arc<Renderer>)> = job
+        let engines: Vec<(Method, Arc<Renderer>)> = job
             .estimators
             .iter()
             .map(|&e| {
                 let renderer = match (&shares, e) {
-                    (Some(r), Estimator::Internal) => r.clone(),
+                    (Some(r), Method::Internal) => r.clone(),
                     _ => {
                         let settings = settings_for(job, e);
                         Arc::new(Renderer::with_lights(prepared.clone(), &settings, None))
@@ -861,7 +849,7 @@ impl JobContext<'_> {
         if let Some(c) = self.newer() {
             return Ok(Some(c));
         }
-        let internal_settings = settings_for(job, Estimator::Internal);
+        let internal_settings = settings_for(job, Method::Internal);
         for pass in 0..job.max_spp {
             if self.cancel.load(Ordering::Relaxed) {
                 return Ok(self.next_command());
@@ -869,7 +857,7 @@ impl JobContext<'_> {
             let start = Instant::now();
             let renew = light_set_starting(&internal_settings, pass);
             for (e, engine) in engines.iter_mut() {
-                if let (Estimator::Internal, Some(set)) = (*e, renew) {
+                if let (Method::Internal, Some(set)) = (*e, renew) {
                     // A fresh light set (built on the CPU, as the first).
                     let params = internal_params_for_set(prepared, &internal_settings, set);
                     let Some(lights) = prepared.build_internal_lights(&params, self.cancel) else {
@@ -903,14 +891,14 @@ fn gpu_engines(
     job: &Job,
     prepared: &Prepared,
     lights: Option<&InternalLights>,
-) -> Result<Vec<(Estimator, GpuRenderer)>, GpuError> {
+) -> Result<Vec<(Method, GpuRenderer)>, GpuError> {
     job.estimators
         .iter()
         .map(|&e| {
             let settings = settings_for(job, e);
             let renderer = match e {
-                Estimator::Reference => GpuRenderer::reference(ctx, prepared, settings.seed)?,
-                Estimator::Internal => {
+                Method::Reference => GpuRenderer::reference(ctx, prepared, settings.seed)?,
+                Method::Internal => {
                     let lights = lights.ok_or_else(|| GpuError::Wgpu {
                         context: "the internal-lights gather".into(),
                         message: "the internal lights were not built".into(),
@@ -937,21 +925,18 @@ type GpuStreams = (Vec<StreamImage>, Option<(f32, f32)>);
 /// noise figures (and, with both estimators, the RMSE of internal lights
 /// against the reference and the reference's mean) from the statistics
 /// pass.
-fn gpu_streams(
-    gpu: &GpuWorker,
-    engines: &[(Estimator, GpuRenderer)],
-) -> Result<GpuStreams, GpuError> {
+fn gpu_streams(gpu: &GpuWorker, engines: &[(Method, GpuRenderer)]) -> Result<GpuStreams, GpuError> {
     let reference = engines
         .iter()
-        .find(|(e, _)| *e == Estimator::Reference)
+        .find(|(e, _)| *e == Method::Reference)
         .map(|(_, r)| r.accum_buffer());
     let mut error_stats = None;
     let mut streams = Vec::new();
     for (estimator, engine) in engines {
         let (width, height) = engine.size();
         let other = match estimator {
-            Estimator::Internal => reference,
-            Estimator::Reference => None,
+            Method::Internal => reference,
+            Method::Reference => None,
         };
         let stats: ImageStats = gpu.stats.stats(
             engine.accum_buffer(),
@@ -1060,7 +1045,7 @@ impl JobContext<'_> {
                 let mut streams = Vec::new();
                 for &estimator in &job.estimators {
                     let settings = settings_for(job, estimator);
-                    let cached = if estimator == Estimator::Internal {
+                    let cached = if estimator == Method::Internal {
                         lights.clone()
                     } else {
                         None
@@ -1116,7 +1101,7 @@ struct SnapshotExtra {
     error_stats: Option<(f32, f32)>,
 }
 
-fn stream_image(estimator: Estimator, films: &[Film; 3]) -> StreamImage {
+fn stream_image(estimator: Method, films: &[Film; 3]) -> StreamImage {
     let film = &films[0];
     let mean = film.mean();
     let variance = film.variance_of_mean();
@@ -1154,7 +1139,7 @@ mod tests {
         Job {
             scene,
             scene_dir: PathBuf::from("."),
-            estimators: vec![Estimator::Internal],
+            estimators: vec![Method::Internal],
             max_spp: 1,
             backend: Backend::Cpu,
         }

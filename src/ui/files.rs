@@ -17,12 +17,12 @@ use eframe::egui;
 use glam::Vec3;
 
 use super::app::LanternApp;
-use super::backend::{Estimator, Snapshot};
+use super::backend::Snapshot;
 use crate::atomic::write_atomically;
 use crate::render::export::{extension, write_png_bytes};
 use crate::render::tonemap::to_srgb8;
 use crate::render::Prepared;
-use crate::scene::{DensitySource, GridFormat, GridSource, Scene};
+use crate::scene::{DensitySource, GridFormat, GridSource, Method, Scene};
 
 /// Largest number of recent files remembered.
 const RECENT_LIMIT: usize = 10;
@@ -284,8 +284,8 @@ pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), 
             meta.push((
                 "method".into(),
                 match stream.estimator {
-                    Estimator::Internal => "internal".into(),
-                    Estimator::Reference => "reference".into(),
+                    Method::Internal => "internal".into(),
+                    Method::Reference => "reference".into(),
                 },
             ));
             let mut layers: Vec<(&str, &[Vec3])> = Vec::new();

@@ -12,9 +12,9 @@ use eframe::egui::{self, Color32, Pos2, Rect, Sense, Stroke, TextureHandle, Ui, 
 use glam::Vec3;
 
 use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset, Session};
-use super::backend::{Estimator, LightsView, Snapshot, StreamImage};
+use super::backend::{LightsView, Snapshot, StreamImage};
 use crate::render::tonemap::to_srgb8;
-use crate::scene::{Camera, CameraFrame, Light, Scene};
+use crate::scene::{Camera, CameraFrame, Light, Method, Scene};
 
 /// The image on screen: the snapshot it was made from and its textures.
 ///
@@ -78,21 +78,18 @@ impl Display {
             }
         }
         self.gpu_texture = None;
-        let find = |e: Estimator| snapshot.streams.iter().find(|st| st.estimator == e);
+        let find = |e: Method| snapshot.streams.iter().find(|st| st.estimator == e);
         let first = snapshot.streams.first();
         let (left, right) = match s.compare {
-            CompareMode::Internal => (find(Estimator::Internal).or(first), None),
-            CompareMode::Reference => (find(Estimator::Reference).or(first), None),
-            CompareMode::Split => (
-                find(Estimator::Internal).or(first),
-                find(Estimator::Reference),
-            ),
+            CompareMode::Internal => (find(Method::Internal).or(first), None),
+            CompareMode::Reference => (find(Method::Reference).or(first), None),
+            CompareMode::Split => (find(Method::Internal).or(first), find(Method::Reference)),
             CompareMode::Error => (None, None),
         };
         self.rmse = None;
         self.reference_mean = None;
         let image = if s.compare == CompareMode::Error {
-            match (find(Estimator::Internal), find(Estimator::Reference)) {
+            match (find(Method::Internal), find(Method::Reference)) {
                 (Some(a), Some(b)) if a.mean.len() == b.mean.len() => {
                     let (img, rmse, mean) = error_heatmap(a, b);
                     self.rmse = Some(rmse);
@@ -139,15 +136,15 @@ impl Display {
             .gpu_view
             .as_mut()
             .ok_or_else(|| "no GPU display in this window".to_string())?;
-        let find = |e: Estimator| {
+        let find = |e: Method| {
             snapshot
                 .streams
                 .iter()
                 .find(|st| st.estimator == e && st.gpu.is_some())
         };
         let first = snapshot.streams.iter().find(|st| st.gpu.is_some());
-        let internal = find(Estimator::Internal).or(first);
-        let reference = find(Estimator::Reference);
+        let internal = find(Method::Internal).or(first);
+        let reference = find(Method::Reference);
         self.rmse = None;
         self.reference_mean = None;
         let (a, b, mode) = match s.compare {
@@ -209,10 +206,10 @@ impl Display {
     }
 
     /// The estimator whose image a still export writes.
-    pub fn shown_estimator(&self, mode: CompareMode) -> Estimator {
+    pub fn shown_estimator(&self, mode: CompareMode) -> Method {
         match mode {
-            CompareMode::Reference => Estimator::Reference,
-            _ => Estimator::Internal,
+            CompareMode::Reference => Method::Reference,
+            _ => Method::Internal,
         }
     }
 }
