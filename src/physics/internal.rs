@@ -496,7 +496,7 @@ pub fn within_view_reach<D: DensityField>(
 /// The sky's light arriving at each of `lights`, `A_i(ω) = L(−ω)
 /// T(x_i, x_i − ∞ ω)` over the directions `ω` light travels, projected on
 /// the real spherical harmonics of `order`: `sh_count(order)` coefficients
-/// per light, estimated from [`SKY_SAMPLES`] (or `K`, if more) directions
+/// per light, estimated from `SKY_SAMPLES` (16) (or `K`, if more) directions
 /// drawn from the sky's own distribution, each with a ratio-tracked
 /// transmittance; empty without a sky. With it, the lights' `S₁`
 /// ([`InternalLights::eval_s1`]: the field `L₁`'s points form, the `k = 0`

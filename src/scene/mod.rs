@@ -28,9 +28,7 @@ pub use error::SceneError;
 pub use grid::VoxelGrid;
 pub use light::Light;
 pub use medium::{CloudParams, DensitySource, GridFormat, GridSource, Medium};
-pub use settings::{
-    Clock, ClockKind, InternalSettings, L1Form, L1Kind, Method, Quality, RenderSettings,
-};
+pub use settings::{Clock, InternalSettings, L1Form, Method, Quality, RenderSettings};
 
 /// Largest image side accepted, in pixels.
 pub const MAX_IMAGE_SIDE: u32 = 16384;

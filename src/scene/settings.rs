@@ -73,14 +73,6 @@ impl L1Form {
     }
 }
 
-/// The scene's former name of [`Clock`], kept for the previewer's code
-/// until it is renamed there (the same type, not a second enum).
-pub type ClockKind = Clock;
-
-/// The scene's former name of [`L1Form`], kept for the previewer's code
-/// until it is renamed there (the same type, not a second enum).
-pub type L1Kind = L1Form;
-
 /// Parameters of the internal-lights method. Changing any of them
 /// re-samples the internal lights.
 ///

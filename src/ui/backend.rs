@@ -43,7 +43,7 @@ use crate::physics::internal::InternalLights;
 use crate::render::{internal_params_for_set, light_set_starting, Film, Prepared};
 use crate::scene::{Density, DensitySource, Method, Scene};
 
-pub use crate::scene::{ClockKind, InternalSettings};
+pub use crate::scene::InternalSettings;
 
 /// Where the passes run.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

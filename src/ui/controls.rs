@@ -11,10 +11,10 @@ use egui_plot::{Bar, BarChart, Plot};
 use glam::Vec3;
 
 use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
-use super::backend::{Backend, ClockKind};
+use super::backend::Backend;
 use crate::physics::sh::MAX_ORDER;
 use crate::render::tonemap::ViewTransform;
-use crate::scene::{L1Kind, Quality};
+use crate::scene::{Clock, L1Form, Quality};
 use crate::scene::{Light, Method};
 
 /// Label of the window-length slider (tests find widgets by label).
@@ -249,12 +249,12 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
         );
     egui::ComboBox::from_label("clock")
         .selected_text(match s.clock {
-            ClockKind::Geometric => "geometric",
-            ClockKind::OpticalDepth => "optical depth",
+            Clock::Geometric => "geometric",
+            Clock::OpticalDepth => "optical depth",
         })
         .show_ui(ui, |ui| {
-            ui.selectable_value(&mut s.clock, ClockKind::OpticalDepth, "optical depth");
-            ui.selectable_value(&mut s.clock, ClockKind::Geometric, "geometric");
+            ui.selectable_value(&mut s.clock, Clock::OpticalDepth, "optical depth");
+            ui.selectable_value(&mut s.clock, Clock::Geometric, "geometric");
         })
         .response
         .on_hover_text(
@@ -264,12 +264,12 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
         );
     egui::ComboBox::from_label("L₁ form")
         .selected_text(match s.l1 {
-            L1Kind::Field => "field",
-            L1Kind::Points => "point lights",
+            L1Form::Field => "field",
+            L1Form::Points => "point lights",
         })
         .show_ui(ui, |ui| {
-            ui.selectable_value(&mut s.l1, L1Kind::Field, "field");
-            ui.selectable_value(&mut s.l1, L1Kind::Points, "point lights");
+            ui.selectable_value(&mut s.l1, L1Form::Field, "field");
+            ui.selectable_value(&mut s.l1, L1Form::Points, "point lights");
         })
         .response
         .on_hover_text(
