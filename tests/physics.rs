@@ -1,44 +1,15 @@
 //! Physics against mathematics: single scattering in a homogeneous sphere
 //! against a numerical integral, and energy conservation with albedo 1.
 
+mod common;
+
+use common::{mean_stderr, sphere};
 use glam::Vec3;
 use lantern::physics::lights::{Lights, PointLight, Sun};
 use lantern::physics::phase::hg;
 use lantern::physics::reference::radiance;
 use lantern::physics::rng::Rng;
-use lantern::physics::volume::{Optics, Volume};
-use lantern::render::SceneVolume;
-use lantern::scene::Density;
-
-fn sphere(radius: f32, optics: Optics) -> SceneVolume {
-    Volume::new(
-        Density::Sphere {
-            center: Vec3::ZERO,
-            radius,
-        },
-        optics,
-        8,
-    )
-}
-
-/// Mean and standard error of `n` estimates.
-fn mean_stderr(n: usize, mut f: impl FnMut(usize) -> Vec3) -> (Vec3, Vec3) {
-    let (mut s, mut s2) = ([0.0f64; 3], [0.0f64; 3]);
-    for i in 0..n {
-        let v = f(i);
-        for c in 0..3 {
-            s[c] += v[c] as f64;
-            s2[c] += (v[c] as f64).powi(2);
-        }
-    }
-    let nf = n as f64;
-    let m: [f64; 3] = std::array::from_fn(|c| s[c] / nf);
-    let e: [f64; 3] = std::array::from_fn(|c| ((s2[c] / nf - m[c] * m[c]).max(0.0) / nf).sqrt());
-    (
-        Vec3::new(m[0] as f32, m[1] as f32, m[2] as f32),
-        Vec3::new(e[0] as f32, e[1] as f32, e[2] as f32),
-    )
-}
+use lantern::physics::volume::Optics;
 
 /// Distance from `p` (inside the unit-radius-R sphere at the origin) to its
 /// boundary along `dir`.

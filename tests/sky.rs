@@ -4,6 +4,8 @@
 
 mod common;
 
+use common::{mean_stderr, sphere};
+
 use std::sync::Arc;
 
 use glam::Vec3;
@@ -12,39 +14,9 @@ use lantern::physics::lights::Lights;
 use lantern::physics::phase::hg;
 use lantern::physics::reference::radiance;
 use lantern::physics::rng::Rng;
-use lantern::physics::volume::{Optics, Volume};
-use lantern::render::{Prepared, SceneVolume};
-use lantern::scene::{Density, Environment as SceneEnvironment, Method, Scene, Sky};
-
-fn sphere(radius: f32, optics: Optics) -> SceneVolume {
-    Volume::new(
-        Density::Sphere {
-            center: Vec3::ZERO,
-            radius,
-        },
-        optics,
-        8,
-    )
-}
-
-/// Mean and standard error of `n` estimates.
-fn mean_stderr(n: usize, mut f: impl FnMut(usize) -> Vec3) -> (Vec3, Vec3) {
-    let (mut s, mut s2) = ([0.0f64; 3], [0.0f64; 3]);
-    for i in 0..n {
-        let v = f(i);
-        for c in 0..3 {
-            s[c] += v[c] as f64;
-            s2[c] += (v[c] as f64).powi(2);
-        }
-    }
-    let nf = n as f64;
-    let m: [f64; 3] = std::array::from_fn(|c| s[c] / nf);
-    let e: [f64; 3] = std::array::from_fn(|c| ((s2[c] / nf - m[c] * m[c]).max(0.0) / nf).sqrt());
-    (
-        Vec3::new(m[0] as f32, m[1] as f32, m[2] as f32),
-        Vec3::new(e[0] as f32, e[1] as f32, e[2] as f32),
-    )
-}
+use lantern::physics::volume::Optics;
+use lantern::render::Prepared;
+use lantern::scene::{Environment as SceneEnvironment, Method, Scene, Sky};
 
 /// Chord length of the ray `o + t d` through the sphere of radius `r` at
 /// the origin (0 if it misses).

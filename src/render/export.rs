@@ -123,32 +123,17 @@ pub struct RgbImage {
 /// [`crate::scene::MAX_IMAGE_SIDE`] on a side is refused before its pixels
 /// are allocated.
 pub fn read_exr(path: &Path) -> Result<RgbImage, ImageError> {
-    use exr::prelude::*;
     let side = crate::scene::MAX_IMAGE_SIDE as usize;
-    let image = read_first_rgba_layer_from_file(
-        path,
-        move |resolution, _| {
-            let (w, h) = (resolution.width(), resolution.height());
-            // Too large: no pixels, reported below.
-            let n = if w <= side && h <= side { w * h } else { 0 };
-            RgbImage {
-                width: w.min(u32::MAX as usize) as u32,
-                height: h.min(u32::MAX as usize) as u32,
-                pixels: vec![Vec3::ZERO; n],
-            }
-        },
-        |img: &mut RgbImage, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-            let i = pos.y() * img.width as usize + pos.x();
-            if let Some(p) = img.pixels.get_mut(i) {
-                *p = Vec3::new(r, g, b);
-            }
-        },
-    )
-    .map_err(|e| ImageError::Read {
-        path: path.to_owned(),
-        reason: e.to_string(),
-    })?;
-    let image = image.layer_data.channel_data.pixels;
+    let read =
+        crate::scene::environment::read_rgb_exr(path, side).map_err(|e| ImageError::Read {
+            path: path.to_owned(),
+            reason: e.to_string(),
+        })?;
+    let image = RgbImage {
+        width: read.width,
+        height: read.height,
+        pixels: read.texels,
+    };
     if image.pixels.len() != image.width as usize * image.height as usize {
         return Err(ImageError::Read {
             path: path.to_owned(),

@@ -237,8 +237,7 @@ impl Prepared {
         let (optics, density, dense) = clamp_dense(&scene.medium, density);
         let volume = Volume::new(density, optics, MAJORANT_CELLS);
         let mut lights = lights_of(&scene.lights);
-        let background = scene.environment.as_ref().is_some_and(|e| e.background);
-        lights.environment = sky.map(|s| Arc::new(environment_of(&s, background)));
+        lights.environment = sky_of(&scene, sky.as_ref());
         Self {
             camera: scene.camera.frame(),
             volume,
@@ -278,9 +277,7 @@ impl Prepared {
         {
             self.lights.environment.clone()
         } else {
-            let background = scene.environment.as_ref().is_some_and(|e| e.background);
-            sky.as_ref()
-                .map(|s| Arc::new(environment_of(s, background)))
+            sky_of(&scene, sky.as_ref())
         };
         Self {
             camera: scene.camera.frame(),
@@ -333,6 +330,13 @@ impl Prepared {
 /// The placement density built for one `u_mix` (its bits), shared by the
 /// [`Prepared`] of one medium.
 type PlacementCache = Mutex<Option<(u32, Arc<PlacementDensity>)>>;
+
+/// `scene`'s loaded `sky` in the estimators' form, drawn behind the medium
+/// if the scene says so.
+fn sky_of(scene: &Scene, sky: Option<&LoadedSky>) -> Option<Arc<Environment>> {
+    let background = scene.environment.as_ref().is_some_and(|e| e.background);
+    sky.map(|s| Arc::new(environment_of(s, background)))
+}
 
 /// The estimators' form of a loaded sky: the map's vertices and sampling
 /// tables ([`EnvMap`]).

@@ -278,21 +278,21 @@ pub fn check_map(path: &Path, map: &SkyMap) -> Result<(), SceneError> {
     Ok(())
 }
 
-fn read_exr_map(path: &Path) -> Result<SkyMap, SceneError> {
+/// The first RGB(A) layer of an OpenEXR file, row-major with row 0 at the
+/// top. An image wider or taller than `max_side` comes back with its size
+/// but no texels, so that the caller refuses it before its pixels are
+/// allocated. (The sky's maps and `render::export::read_exr`.)
+pub fn read_rgb_exr(path: &Path, max_side: usize) -> exr::error::Result<SkyMap> {
     use exr::prelude::*;
-    if let Err(reason) = std::fs::metadata(path) {
-        return Err(SceneError::Io {
-            path: path.to_owned(),
-            reason,
-        });
-    }
-    let side = MAX_MAP_WIDTH as usize;
     let image = read_first_rgba_layer_from_file(
         path,
         move |resolution, _| {
             let (w, h) = (resolution.width(), resolution.height());
-            // Too large: no texels, reported below.
-            let n = if w <= side && h <= side { w * h } else { 0 };
+            let n = if w <= max_side && h <= max_side {
+                w * h
+            } else {
+                0
+            };
             SkyMap {
                 width: w.min(u32::MAX as usize) as u32,
                 height: h.min(u32::MAX as usize) as u32,
@@ -305,9 +305,20 @@ fn read_exr_map(path: &Path) -> Result<SkyMap, SceneError> {
                 *p = Vec3::new(r, g, b);
             }
         },
-    )
-    .map_err(|e| SceneError::environment(path, format!("is not a readable OpenEXR map: {e}")))?;
-    let map = image.layer_data.channel_data.pixels;
+    )?;
+    Ok(image.layer_data.channel_data.pixels)
+}
+
+fn read_exr_map(path: &Path) -> Result<SkyMap, SceneError> {
+    if let Err(reason) = std::fs::metadata(path) {
+        return Err(SceneError::Io {
+            path: path.to_owned(),
+            reason,
+        });
+    }
+    let map = read_rgb_exr(path, MAX_MAP_WIDTH as usize).map_err(|e| {
+        SceneError::environment(path, format!("is not a readable OpenEXR map: {e}"))
+    })?;
     if map.width > MAX_MAP_WIDTH || map.texels.len() != map.width as usize * map.height as usize {
         return Err(SceneError::environment(
             path,

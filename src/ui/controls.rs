@@ -343,6 +343,7 @@ fn lights_ui(ui: &mut Ui, app: &mut LanternApp) {
                     "sun irradiance",
                     "Irradiance of the sun in W/m² on a surface facing it (colour × \
                      strength). Brightens everything linearly.",
+                    LIGHT_STRENGTH_MAX,
                 );
             }
             Light::Point {
@@ -366,6 +367,7 @@ fn lights_ui(ui: &mut Ui, app: &mut LanternApp) {
                     intensity,
                     "point intensity",
                     "Intensity in W/sr (colour × strength); falls off as 1/r².",
+                    LIGHT_STRENGTH_MAX,
                 );
             }
         });
@@ -401,8 +403,12 @@ fn sun_direction_ui(ui: &mut Ui, direction: &mut Vec3) {
     }
 }
 
-/// An RGB radiometric quantity as a colour and a logarithmic strength.
-fn rgb_intensity_ui(ui: &mut Ui, value: &mut Vec3, label: &str, tip: &str) {
+/// The largest strength the sun's and the point lights' sliders reach.
+const LIGHT_STRENGTH_MAX: f32 = 1000.0;
+
+/// An RGB radiometric quantity as a colour and a logarithmic strength of
+/// at most `max` (the lights' and the sky's controls).
+pub(super) fn rgb_intensity_ui(ui: &mut Ui, value: &mut Vec3, label: &str, tip: &str, max: f32) {
     let strength = value.max_element();
     let tint = if strength > 0.0 {
         *value / strength
@@ -414,11 +420,7 @@ fn rgb_intensity_ui(ui: &mut Ui, value: &mut Vec3, label: &str, tip: &str) {
     ui.horizontal(|ui| {
         let c = ui.color_edit_button_rgb(&mut rgb).on_hover_text(tip);
         let r = ui
-            .add(
-                Slider::new(&mut s, 0.0..=1000.0)
-                    .logarithmic(true)
-                    .text(label),
-            )
+            .add(Slider::new(&mut s, 0.0..=max).logarithmic(true).text(label))
             .on_hover_text(tip);
         if c.changed() || r.changed() {
             *value = Vec3::from(rgb).max(Vec3::ZERO) * s;

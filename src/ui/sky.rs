@@ -344,30 +344,15 @@ fn choose(app: &mut LanternApp, current: Kind, chosen: Kind) {
 
 /// The constant sky's radiance as a colour and a logarithmic strength.
 fn radiance_ui(ui: &mut Ui, value: &mut Vec3) {
-    let tip = "Radiance of the sky in W/m²/sr (colour × strength), the same from \
-               every direction. A sky of radiance L gives a horizontal surface an \
-               irradiance of πL from above.";
-    let strength = value.max_element();
-    let tint = if strength > 0.0 {
-        *value / strength
-    } else {
-        Vec3::ONE
-    };
-    let mut rgb = [tint.x, tint.y, tint.z];
-    let mut s = strength;
-    ui.horizontal(|ui| {
-        let c = ui.color_edit_button_rgb(&mut rgb).on_hover_text(tip);
-        let r = ui
-            .add(
-                Slider::new(&mut s, 0.0..=100.0)
-                    .logarithmic(true)
-                    .text(RADIANCE),
-            )
-            .on_hover_text(tip);
-        if c.changed() || r.changed() {
-            *value = Vec3::from(rgb).max(Vec3::ZERO) * s;
-        }
-    });
+    super::controls::rgb_intensity_ui(
+        ui,
+        value,
+        RADIANCE,
+        "Radiance of the sky in W/m²/sr (colour × strength), the same from \
+         every direction. A sky of radiance L gives a horizontal surface an \
+         irradiance of πL from above.",
+        100.0,
+    );
 }
 
 /// The map's file line: the path and the button that opens the dialog.

@@ -221,3 +221,38 @@ pub fn gpu_render(renderer: &mut lantern::gpu::GpuRenderer, spp: u32) -> lantern
     }
     renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"))
 }
+
+/// A homogeneous sphere of `radius` at the origin with `optics` (8
+/// majorant cells along each axis).
+pub fn sphere(
+    radius: f32,
+    optics: lantern::physics::volume::Optics,
+) -> lantern::render::SceneVolume {
+    lantern::physics::volume::Volume::new(
+        lantern::scene::Density::Sphere {
+            center: Vec3::ZERO,
+            radius,
+        },
+        optics,
+        8,
+    )
+}
+
+/// Mean and standard error of `n` estimates.
+pub fn mean_stderr(n: usize, mut f: impl FnMut(usize) -> Vec3) -> (Vec3, Vec3) {
+    let (mut s, mut s2) = ([0.0f64; 3], [0.0f64; 3]);
+    for i in 0..n {
+        let v = f(i);
+        for c in 0..3 {
+            s[c] += v[c] as f64;
+            s2[c] += (v[c] as f64).powi(2);
+        }
+    }
+    let nf = n as f64;
+    let m: [f64; 3] = std::array::from_fn(|c| s[c] / nf);
+    let e: [f64; 3] = std::array::from_fn(|c| ((s2[c] / nf - m[c] * m[c]).max(0.0) / nf).sqrt());
+    (
+        Vec3::new(m[0] as f32, m[1] as f32, m[2] as f32),
+        Vec3::new(e[0] as f32, e[1] as f32, e[2] as f32),
+    )
+}
