@@ -78,8 +78,7 @@ fn renewed_light_sets_average_the_walk_noise_out() {
     let b = render(&prepared, 3, 4, 16);
     assert_eq!(a.mean(), b.mean());
     // Passes 0..3 use set 0 in both; a render that renews its set only
-    // after 1000 passes differs from pass 4 on. (A render that never
-    // renews clamps its reconstruction, `InternalParams::renewed`.)
+    // after 1000 passes differs from pass 4 on.
     assert_eq!(
         render(&prepared, 3, 4, 4).mean(),
         render(&prepared, 3, 1000, 4).mean()

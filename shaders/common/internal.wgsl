@@ -2,8 +2,8 @@
 // read side of `InternalLights` in src/physics/internal.rs: `S₁` from the
 // stored arriving light, the multiply scattered part from its SH
 // coefficients (clamped at zero for one light), and the kernel
-// reconstruction of `Ĵ` at a point, which sums the lights' series
-// unclamped and clamps their normalised average at zero.
+// reconstruction of `Ĵ` at a point, the normalised average of the lights'
+// series, unclamped.
 
 // One internal light (`InternalLight`, plus its reconstruction scale).
 struct InternalLight {
@@ -72,9 +72,8 @@ fn reconstruction_scale(density_at_p: f32) -> f32 {
 // The kernel reconstruction of the multiply scattered `Ĵ(p, n)` from the
 // lights within `h` of `p`, kernel `(1 − r²/h²)²` (`reconstruct_multi`
 // with `for_each_kernel_weight` and `LightGrid::for_each_near`). The
-// lights' series are summed unclamped and the average is clamped at zero
-// (not with renewed light sets), as on the CPU: clamping each noisy series
-// would bias `Ĵ` upwards where it is small. `offset` picks the part (`Part` on the CPU):
+// lights' series are summed and averaged unclamped, as on the CPU: a clamp
+// would bias `Ĵ` upwards where it is small next to its walk noise. `offset` picks the part (`Part` on the CPU):
 // `gather_params.multi_offset` for all of it (`L₁`), `scattered_offset`
 // for what the walks carried through a collision (`L₀`).
 fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32) -> vec3<f32> {
@@ -126,12 +125,9 @@ fn kernel_average(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32, fr
     if den <= 0.0 {
         return vec3<f32>(0.0);
     }
-    // Renewed light sets: unclamped, so that the average over sets is
-    // unbiased (`InternalLights::reconstruct_multi`).
-    if gather_params.unclamped != 0u {
-        return num * (scale_p / den);
-    }
-    return max(num * (scale_p / den), vec3<f32>(0.0));
+    // Unclamped, so that the average over light sets is unbiased
+    // (`InternalLights::kernel_average`).
+    return num * (scale_p / den);
 }
 
 // `L₀`'s collided part at `p` as the camera sees it: the kernel average of

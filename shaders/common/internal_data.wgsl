@@ -48,7 +48,6 @@ struct GatherParams {
     l1_form: u32,
     scattered_offset: u32,
     n_terms: u32,
-    unclamped: u32,
     // Scatterings inside the window that the field form of L₁ follows
     // (`InternalParams::window_scatters`).
     window_scatters: u32,
@@ -58,6 +57,7 @@ struct GatherParams {
     has_view: u32,
     _pad0: u32,
     _pad1: u32,
+    _pad2: u32,
 }
 
 // The clock tags `CLOCK_*` and the forms of the gather's L₁, `L1_*`, come

@@ -108,12 +108,12 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
         l1_form: cache.params.l1.tag(),
         scattered_offset,
         n_terms: cache.params.terms,
-        unclamped: u32::from(cache.params.renewed),
         window_scatters: cache.params.window_scatters.max(1),
         view_offset,
         has_view: u32::from(has_view),
         _pad0: 0,
         _pad1: 0,
+        _pad2: 0,
     };
     PackedLights {
         params,

@@ -255,9 +255,6 @@ pub struct GpuGatherParams {
     /// Series truncation `N` (the marched single scatter beyond the
     /// window reaches a clock of `(N+1) s*`).
     pub n_terms: u32,
-    /// 1: the kernel reconstruction is left unclamped (light sets are
-    /// renewed, `InternalParams::renewed`); 0: clamped at zero.
-    pub unclamped: u32,
     /// Scatterings inside the window that the field form of `L₁` follows
     /// (`InternalParams::window_scatters`).
     pub window_scatters: u32,
@@ -271,6 +268,8 @@ pub struct GpuGatherParams {
     pub _pad0: u32,
     /// See `_pad0`.
     pub _pad1: u32,
+    /// See `_pad0`.
+    pub _pad2: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 208);
 

@@ -547,7 +547,6 @@ mod tests {
             view_walks: 0,
             eye: Vec3::ZERO,
             seed: 0,
-            renewed: false,
             view_share: 0.0,
             view_frame: Default::default(),
         }
@@ -629,7 +628,6 @@ mod tests {
         for clock in [Clock::Geometric, Clock::OpticalDepth] {
             let mut params = sh1_params(clock, 0.5, 4, 0.35, L1Form::Field);
             params.sh_order = 4;
-            params.renewed = true;
             let cache = assemble(&vol, &params, &lights, multi.clone(), scattered.clone());
             let h = cache.kernel_radius;
             for q in 0..200 {
@@ -749,7 +747,6 @@ mod tests {
             kernel_radius: None,
             view_walks: 1024,
             eye,
-            renewed: true,
             view_share: 0.0,
             view_frame: Default::default(),
             ..sh1_params(Clock::OpticalDepth, 0.5, 24, 0.3, L1Form::Field)
@@ -1195,14 +1192,15 @@ mod tests {
         }
     }
 
-    /// With renewed light sets the passes average the reconstruction over
-    /// sets, so it must be linear in the lights' coefficients: the average
-    /// of two sets whose walk noise is `+D` and `−D` is the reconstruction
-    /// of the noiseless sources, negative lobes included. A single set's
-    /// reconstruction is clamped at zero, which biases that average
-    /// upwards where `J` is small.
+    /// Passes average the reconstruction over light sets (renewed sets
+    /// within one render, or renders with different seeds), so it must be
+    /// linear in the lights' coefficients: the average of two sets whose
+    /// walk noise is `+D` and `−D` is the reconstruction of the noiseless
+    /// sources, negative lobes included. A clamp at zero would bias that
+    /// average upwards where `J` is small (the puffs' dimmer half at
+    /// `s*` 0.25 with one set: +3.6 % clamped, +0.9 % unclamped).
     #[test]
-    fn renewed_sets_reconstruct_without_clamping() {
+    fn light_sets_reconstruct_without_clamping() {
         let vol = cube(2.0, 0.9, 0.0);
         let mut lights = Vec::new();
         for i in 0..27 {
@@ -1223,10 +1221,9 @@ mod tests {
             }
             coeffs
         };
-        let build = |renewed: bool, a: f32, b: f32| {
+        let build = |a: f32, b: f32| {
             let params = InternalParams {
                 lights: lights.len(),
-                renewed,
                 ..sh1_params(Clock::OpticalDepth, 0.5, 1, 0.5, L1Form::Field)
             };
             assemble(&vol, &params, &lights, sources(a, b), sources(a, b))
@@ -1234,33 +1231,29 @@ mod tests {
         let dirs = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z];
         let (a, b, da, db) = (1.0, 3.0, 0.5, 2.0);
         let mut negative = 0;
+        let mut either_sign = 0;
         for part in [Part::All, Part::Scattered] {
             for n in dirs {
                 let at = |c: &InternalLights| c.reconstruct_multi(Vec3::ZERO, n, 1.0, part);
-                let truth = at(&build(true, a, b));
-                let plus = at(&build(true, a + da, b + db));
-                let minus = at(&build(true, a - da, b - db));
+                let truth = at(&build(a, b));
+                let plus = at(&build(a + da, b + db));
+                let minus = at(&build(a - da, b - db));
                 let avg = 0.5 * (plus + minus);
                 assert!(
                     (avg - truth).abs().max_element() <= 1e-5 * truth.abs().max_element(),
-                    "{n}: renewed sets average to {avg}, the noiseless sources give {truth}"
+                    "{n}: two sets average to {avg}, the noiseless sources give {truth}"
                 );
                 if truth.min_element() < 0.0 {
                     negative += 1;
                 }
-                let clamped = |a, b| at(&build(false, a, b));
-                let (cp, cm) = (clamped(a + da, b + db), clamped(a - da, b - db));
-                assert_eq!(clamped(a, b), truth.max(Vec3::ZERO));
-                assert!(cp.min_element() >= 0.0 && cm.min_element() >= 0.0);
-                // Where a set's value has either sign, the clamped average
-                // is above the noiseless value.
                 for c in 0..3 {
                     if plus[c].min(minus[c]) < 0.0 && plus[c].max(minus[c]) > 0.0 {
-                        assert!(0.5 * (cp[c] + cm[c]) > truth[c].max(0.0), "{n} channel {c}");
+                        either_sign += 1;
                     }
                 }
             }
         }
         assert!(negative >= 2, "the test needs negative lobes");
+        assert!(either_sign >= 2, "the test needs sets of either sign");
     }
 }

@@ -15,10 +15,11 @@
 //! angle, goes through the spherical harmonics. (This is where this module
 //! goes beyond the note, which projects all of `J`: the SH order then only
 //! limits the part it represents well.) The kernel average of the lights'
-//! `J_i(n)` is clamped at zero, since a truncated SH series rings below
-//! zero where the function is small, unless the render renews its light
-//! sets (then the passes average to the expectation over sets, which the
-//! clamp would bias: [`InternalLights::reconstruct_multi`]).
+//! `J_i(n)` is left unclamped, although a truncated SH series and the
+//! walks' noise can take it below zero where the function is small: the
+//! reconstruction stays linear in the lights' coefficients, so that its
+//! average over light sets is the method's expectation
+//! ([`InternalLights::reconstruct_multi`]).
 //!
 //! The multiply scattered part is stored twice: all of it (what `L₁`
 //! scatters once more, and what the gizmos and the point form show), and
@@ -172,10 +173,6 @@ pub struct InternalParams {
     pub view_share: f32,
     /// The camera, for `view_share` (the default frame when unused).
     pub view_frame: ViewFrame,
-    /// Whether the render renews its light sets (`resample_every > 0`):
-    /// the passes then average over sets, and the kernel reconstruction
-    /// is left unclamped ([`InternalLights::reconstruct_multi`]).
-    pub renewed: bool,
 }
 
 /// The automatic kernel radius in units of the mean light spacing: about
@@ -1114,13 +1111,14 @@ impl InternalLights {
     /// Zero where no light is within `h`. `part` says which part of
     /// `Σ_{k≥1} J_k`: all of it (`L₁`'s source) or what the walks carried
     /// through a collision (`L₀`'s, beside the marched single scatter).
-    /// The average is clamped at zero, unless the render renews its light
-    /// sets ([`InternalParams::renewed`]): the passes then converge to the
-    /// expectation over sets, and the clamp's `E[max(X, 0)] ≥ max(E[X], 0)`
-    /// would bias it upwards wherever `J` is small next to its walk noise
-    /// (puffs at 96², SH order 4, K 64, a fresh set every 2 passes: bias
-    /// 8.61 % clamped, 7.30 % unclamped; [validation](crate::doc::validation) §4). Left
-    /// unclamped the reconstruction is linear in the lights' coefficients.
+    /// The average is not clamped at zero: a clamp's
+    /// `E[max(X, 0)] ≥ max(E[X], 0)` would bias it upwards wherever `J` is
+    /// small next to its walk noise, with renewed sets (puffs at 96², SH
+    /// order 4, K 64, a fresh set every 2 passes: bias 8.61 % clamped,
+    /// 7.30 % unclamped) and with one set alike (the puffs' dimmer half at
+    /// `s*` 0.25, one set, seeds 8–11: +3.6 % clamped, +0.9 % unclamped;
+    /// [validation](crate::doc::validation) §4). Unclamped, the
+    /// reconstruction is linear in the lights' coefficients.
     pub fn reconstruct_multi(&self, p: Vec3, n: Vec3, density_at_p: f32, part: Part) -> Vec3 {
         let scale_p = self.reconstruction_scale(density_at_p);
         if scale_p <= 0.0 {
@@ -1130,11 +1128,11 @@ impl InternalLights {
             Part::All => &self.fine_multi,
             Part::Scattered => &self.fine_scattered,
         };
-        // The lights' SH series are summed unclamped and the average is
-        // clamped: clamping each light's noisy series at zero would bias
-        // the average upwards wherever `J` is small (measured on the
-        // forward-scattering puffs at K = 128: +6.8 % clamped per light,
-        // +4.5 % clamped after the sum). The series is linear in the
+        // The lights' SH series are summed unclamped: clamping each
+        // light's noisy series at zero would bias the average upwards
+        // wherever `J` is small (measured on the forward-scattering puffs
+        // at K = 128: +6.8 % clamped per light, +4.5 % clamped after the
+        // sum; the average is now not clamped either). The series is linear in the
         // coefficients, so the kernel sums them (a contiguous
         // multiply-add the compiler vectorises) and evaluates the sum
         // once: on the puffs at 256² (M 16384, SH order 4) this function
@@ -1203,15 +1201,11 @@ impl InternalLights {
     }
 
     /// The normalised kernel average `num / den` back in `Ĵ` (`scale_p`,
-    /// [`InternalLights::reconstruction_scale`]), clamped at zero unless
-    /// the light sets are renewed ([`InternalParams::renewed`]).
+    /// [`InternalLights::reconstruction_scale`]), unclamped
+    /// ([`InternalLights::reconstruct_multi`]).
     #[inline]
     fn kernel_average(&self, num: Vec3, den: f32, scale_p: f32) -> Vec3 {
-        if self.params.renewed {
-            num * (scale_p / den)
-        } else {
-            (num * (scale_p / den)).max(Vec3::ZERO)
-        }
+        num * (scale_p / den)
     }
 
     /// The factor that turns the kernel average back into `Ĵ` at a point of
