@@ -266,14 +266,8 @@ pub fn heat(t: f32) -> Color32 {
 /// and channels, and the reference's mean.
 pub fn error_heatmap(a: &StreamImage, b: &StreamImage) -> (egui::ColorImage, f32, f32) {
     let n = a.mean.len().max(1) as f64;
-    let mut sq = 0.0f64;
-    let mut ref_sum = 0.0f64;
-    for (x, y) in a.mean.iter().zip(&b.mean) {
-        let d = *x - *y;
-        sq += (d.length_squared() / 3.0) as f64;
-        ref_sum += (y.element_sum() / 3.0) as f64;
-    }
-    let rmse = (sq / n).sqrt() as f32;
+    let ref_sum: f64 = b.mean.iter().map(|y| (y.element_sum() / 3.0) as f64).sum();
+    let rmse = crate::render::stats::rmse(&a.mean, &b.mean) as f32;
     let mean = (ref_sum / n) as f32;
     let scale = if mean > 0.0 { 1.0 / mean } else { 1.0 };
     let pixels = a
