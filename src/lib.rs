@@ -17,6 +17,7 @@
 //! render/   backend-neutral: prepared scene, progressive film, tone mapping, export
 //! cpu/      the rayon backend
 //! gpu/      the wgpu backend: headless device, GPU mirrors, compute pipelines
+//! session/  backend-neutral render session: the CPU/GPU choice, light-set renewal, the worker
 //! ui/       the interactive previewer (eframe, egui, rfd): the only UI code
 //! cli/      headless rendering, export, benchmarks and the measuring commands
 //! atomic.rs files written whole or not at all (every writer uses it)
@@ -25,8 +26,8 @@
 //!
 //! `scene` and `physics` are leaves and never import each other (`scene`
 //! writes its files through `atomic`, which uses only `std`); `render`
-//! uses both; `cpu` and `gpu` use `render`; only `cli` and `ui` sit on
-//! top.
+//! uses both; `cpu` and `gpu` use `render`; `session` uses both backends; only
+//! `cli` and `ui` sit on top.
 //! Renderers know nothing of any user interface.
 
 pub mod atomic;
@@ -37,6 +38,7 @@ pub mod gpu;
 pub mod physics;
 pub mod render;
 pub mod scene;
+pub mod session;
 pub mod ui;
 
 /// The path `lantern::validate::compare` that `tests/internal_lights.rs`

@@ -8,17 +8,6 @@ use clap::ValueEnum;
 
 use crate::scene::{Clock, InternalSettings, L1Form, Quality};
 
-/// Which backend renders.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
-pub enum BackendArg {
-    /// The rayon CPU renderer (both methods).
-    #[default]
-    Cpu,
-    /// The wgpu compute renderer (both methods; internal lights built on
-    /// the GPU).
-    Gpu,
-}
-
 /// An image size on the command line: `N` (square) or `WxH`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ImageSize {

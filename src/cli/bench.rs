@@ -9,12 +9,13 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 
-use super::args::{BackendArg, ImageSize, InternalArgs};
+use super::args::{ImageSize, InternalArgs};
 use super::support::{gpu_context, gpu_renderer};
 use crate::cpu::Renderer;
 use crate::gpu::GpuContext;
 use crate::render::Prepared;
 use crate::scene::{Method, Scene};
+use crate::session::Backend;
 
 /// Options of `lantern bench`.
 #[derive(Clone, Debug, clap::Args)]
@@ -40,8 +41,8 @@ pub struct BenchArgs {
     /// Which backend renders (gpu: for the internal-lights method the
     /// lights are placed and walked on the GPU too; only their spatial
     /// indices are built on the CPU).
-    #[arg(long, value_enum, default_value_t = BackendArg::Cpu)]
-    pub backend: BackendArg,
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    pub backend: Backend,
     /// Internal-lights parameters.
     #[command(flatten)]
     pub internal: InternalArgs,
@@ -104,8 +105,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         bail!("--spp and --repeats must be at least 1");
     }
     let gpu = match backend {
-        BackendArg::Cpu => None,
-        BackendArg::Gpu => Some(gpu_context()?),
+        Backend::Cpu => None,
+        Backend::Gpu => Some(gpu_context()?),
     };
     let scenes = if scenes.is_empty() {
         let mut v: Vec<PathBuf> = std::fs::read_dir("assets/scenes")
@@ -127,11 +128,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         "passes/s",
         "M samples/s",
         match backend {
-            BackendArg::Cpu => "re-sample s",
-            BackendArg::Gpu => "set-up s",
+            Backend::Cpu => "re-sample s",
+            Backend::Gpu => "set-up s",
         },
         match (backend, method) {
-            (BackendArg::Gpu, Method::Internal) => format!(" {:>16}", "GPU re-sample s"),
+            (Backend::Gpu, Method::Internal) => format!(" {:>16}", "GPU re-sample s"),
             _ => String::new(),
         }
     );

@@ -27,7 +27,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
-pub use args::{BackendArg, ImageSize, InternalArgs, QualityArg, TimedArgs};
+pub use args::{ImageSize, InternalArgs, QualityArg, TimedArgs};
 pub use render::{render_metadata, RenderArgs, StopRule};
 pub use support::load_prepared;
 

@@ -11,17 +11,15 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::args::{BackendArg, InternalArgs, TimedArgs};
+use super::args::{InternalArgs, TimedArgs};
 use super::support::{gpu_context, gpu_renderer};
 use crate::cpu::Renderer;
-use crate::gpu::walks::build_internal_lights_gpu;
 use crate::render::export::{write_exr_with_metadata, write_image};
 use crate::render::film::image_mean;
 use crate::render::tonemap::ViewTransform;
-use crate::render::{
-    internal_params, internal_params_for_set, light_set, light_set_starting, Film, Prepared,
-};
+use crate::render::{internal_params, light_set, Film, Prepared};
 use crate::scene::{Method, RenderSettings, Scene};
+use crate::session::{renew_gpu_lights, Backend, LightBuilder, Renewal};
 
 /// Options of `lantern render`.
 #[derive(Clone, Debug, clap::Args)]
@@ -46,8 +44,8 @@ pub struct RenderArgs {
     /// Which backend renders (gpu: for the internal-lights method the
     /// lights are placed and walked on the GPU too; only their spatial
     /// indices are built on the CPU).
-    #[arg(long, value_enum, default_value_t = BackendArg::Cpu)]
-    pub backend: BackendArg,
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    pub backend: Backend,
     /// Exposure in stops, for PNG output.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub exposure: f32,
@@ -97,7 +95,7 @@ pub fn render_metadata(
     settings: &RenderSettings,
     spp: u32,
     seconds: f64,
-    backend: BackendArg,
+    backend: Backend,
     time_limit: Option<f64>,
     s_star: Option<f32>,
 ) -> Vec<(String, String)> {
@@ -228,7 +226,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     for warning in crate::render::limits::warnings(&prepared, &settings) {
         eprintln!("warning: {warning}");
     }
-    if backend == BackendArg::Gpu {
+    if backend == Backend::Gpu {
         let rule = stop_rule(spp, settings.spp, timed);
         return render_gpu(
             scene_path, &prepared, &settings, load_secs, out, exposure, view, rule, timed,
@@ -292,7 +290,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         &settings,
         film.samples,
         spent,
-        BackendArg::Cpu,
+        Backend::Cpu,
         timed.time,
         s_star,
     );
@@ -435,15 +433,13 @@ fn render_gpu(
     let mut resample_secs = 0.0;
     let mut pass = 0;
     while rule.another(pass, t_build.elapsed().as_secs_f64()) {
-        let renew =
-            light_set_starting(settings, pass).filter(|_| settings.method == Method::Internal);
-        if let Some(set) = renew {
-            // A fresh light set, walked on the GPU like the first.
-            let t = Instant::now();
+        // A fresh light set when the pass starts one, walked on the GPU
+        // like the first.
+        let t = Instant::now();
+        let builder = LightBuilder::Gpu(&ctx);
+        let renewal = renew_gpu_lights(&mut renderer, prepared, settings, pass, builder)?;
+        if let Renewal::Renewed(set) = renewal {
             sets = set;
-            let params = internal_params_for_set(prepared, settings, set);
-            let lights = build_internal_lights_gpu(&ctx, prepared, &params)?;
-            renderer.set_internal_lights(&lights, settings.internal.light_samples)?;
             resample_secs += t.elapsed().as_secs_f64();
         }
         renderer.add_pass(pass);
@@ -473,7 +469,7 @@ fn render_gpu(
         settings,
         film.samples,
         spent,
-        BackendArg::Gpu,
+        Backend::Gpu,
         timed.time,
         s_star,
     );

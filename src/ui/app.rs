@@ -13,12 +13,12 @@ use std::time::{Duration, Instant};
 use eframe::egui;
 use serde::{Deserialize, Serialize};
 
-use super::backend::{Backend, Job, Worker};
 use super::files::{self, Loaded};
 use super::viewport::{Display, NavState};
 use super::LaunchOptions;
 use crate::render::tonemap::ViewTransform;
 use crate::scene::{Method, Scene};
+use crate::session::{Backend, Job, Worker};
 
 /// What is edited, saved and undone: the scene, with the method's
 /// settings in `scene.render`.

@@ -11,11 +11,11 @@ use egui_plot::{Bar, BarChart, Plot};
 use glam::Vec3;
 
 use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
-use super::backend::Backend;
 use crate::physics::sh::MAX_ORDER;
 use crate::render::tonemap::ViewTransform;
 use crate::scene::{Clock, L1Form, Quality};
 use crate::scene::{Light, Method};
+use crate::session::Backend;
 
 /// Label of the window-length slider (tests find widgets by label).
 pub const S_STAR: &str = "s* (window)";

@@ -17,12 +17,12 @@ use eframe::egui;
 use glam::Vec3;
 
 use super::app::LanternApp;
-use super::backend::Snapshot;
 use crate::atomic::write_atomically;
 use crate::render::export::{extension, write_png_bytes};
 use crate::render::tonemap::to_srgb8;
 use crate::render::Prepared;
 use crate::scene::{DensitySource, GridFormat, GridSource, Method, Scene};
+use crate::session::Snapshot;
 
 /// Largest number of recent files remembered.
 const RECENT_LIMIT: usize = 10;

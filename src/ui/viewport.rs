@@ -12,9 +12,9 @@ use eframe::egui::{self, Color32, Pos2, Rect, Sense, Stroke, TextureHandle, Ui, 
 use glam::Vec3;
 
 use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset, Session};
-use super::backend::{LightsView, Snapshot, StreamImage};
 use crate::render::tonemap::to_srgb8;
 use crate::scene::{Camera, CameraFrame, Light, Method, Scene};
+use crate::session::{LightsView, Snapshot, StreamImage};
 
 /// The image on screen: the snapshot it was made from and its textures.
 ///
