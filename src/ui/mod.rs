@@ -5,13 +5,16 @@
 //! [`crate::session`], whose worker thread calls the renderers, so that the
 //! UI never blocks on a pass; it edits jobs and shows snapshots.
 //!
-//! - [`app`]: the application state, the frame loop, undo and the session.
+//! - [`app`]: the application, the frame loop, undo, scripted runs.
+//! - [`state`]: what the panels edit: the document, the session, the
+//!   notifications (no panel imports [`app`]).
 //! - [`controls`]: the side panel of parameters.
 //! - [`sky`]: the Sky section (environment light), its thumbnail, and
 //!   sky maps dropped on the window.
 //! - [`viewport`]: the progressive image, camera navigation, gizmos and the
 //!   comparisons (split view, error heatmap).
 //! - [`files`]: scene files, drag and drop, recent files and image export.
+//! - [`widgets`]: small widgets shared by the panels.
 //! - [`gpu_view`]: the GPU backend on the window's own device, and the
 //!   shown image as a texture written on the GPU.
 
@@ -20,7 +23,9 @@ pub mod controls;
 pub mod files;
 pub mod gpu_view;
 pub mod sky;
+pub mod state;
 pub mod viewport;
+pub mod widgets;
 
 use std::path::PathBuf;
 
