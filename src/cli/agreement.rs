@@ -152,7 +152,15 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
         });
     }
 
-    let table = format_table(&stem, &base, s0, args, w, h, ref_secs, &rows);
+    let table = format_table(&Table {
+        stem: &stem,
+        base: &base,
+        s0,
+        args,
+        size: (w, h),
+        ref_secs,
+        rows: &rows,
+    });
     print!("{table}");
     crate::atomic::write_bytes(&out_dir.join("table.md"), table.as_bytes())?;
     for sweep in ["s*", "N", "M"] {
@@ -195,17 +203,36 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)] // the table's header lists them all
-fn format_table(
-    stem: &str,
-    base: &RenderSettings,
+/// What the table of `lantern validate` shows: its header's settings and
+/// the rows.
+struct Table<'a> {
+    /// The scene's name.
+    stem: &'a str,
+    /// The base settings the sweeps vary.
+    base: &'a RenderSettings,
+    /// The base settings' resolved `s*`.
     s0: f32,
-    args: &ValidateArgs,
-    w: u32,
-    h: u32,
+    /// The command's options (sample counts).
+    args: &'a ValidateArgs,
+    /// Image width and height.
+    size: (u32, u32),
+    /// Seconds the reference took.
     ref_secs: f64,
-    rows: &[Row],
-) -> String {
+    /// One row per run.
+    rows: &'a [Row],
+}
+
+/// The table as Markdown.
+fn format_table(table: &Table<'_>) -> String {
+    let Table {
+        stem,
+        base,
+        s0,
+        args,
+        size: (w, h),
+        ref_secs,
+        rows,
+    } = *table;
     let i = &base.internal;
     let mut t = String::new();
     let _ = writeln!(

@@ -228,9 +228,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     if backend == Backend::Gpu {
         let rule = stop_rule(spp, settings.spp, timed);
-        return render_gpu(
-            scene_path, &prepared, &settings, load_secs, out, exposure, view, rule, timed,
-        );
+        return render_gpu(args, &prepared, &settings, load_secs, rule);
     }
     let method = settings.method;
     let (w, h) = (prepared.camera.width, prepared.camera.height);
@@ -409,18 +407,15 @@ fn print_time_limit(timed: &TimedArgs, spp: u32, spent: f64) {
 
 /// `render --backend gpu`: the reference method on the GPU, accumulated
 /// there and read back once for the image file.
-#[allow(clippy::too_many_arguments)] // render_command's options
 fn render_gpu(
-    scene_path: &Path,
+    args: &RenderArgs,
     prepared: &Prepared,
     settings: &RenderSettings,
     load_secs: f64,
-    out: &Path,
-    exposure: f32,
-    view: ViewTransform,
     rule: StopRule,
-    timed: &TimedArgs,
 ) -> Result<()> {
+    let (scene_path, out) = (args.scene.as_path(), args.out.as_path());
+    let (exposure, view, timed) = (args.exposure, args.view, &args.timed);
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let ctx = gpu_context()?;
     let t_build = Instant::now();
