@@ -6,7 +6,7 @@
 //!   negative and non-finite) within one 8-bit step; the split view and
 //!   the heatmap pick the right buffer and ramp; the statistics pass equals
 //!   the same sums on the CPU.
-//! - The worker (`ui::backend`) on the GPU backend renders images whose
+//! - The worker (`session::worker`) on the GPU backend renders images whose
 //!   mean agrees with the CPU backend's (reference and internal lights,
 //!   within 4 standard errors of their difference), and a scene too large
 //!   for the device falls back to the CPU with a notice.
@@ -27,7 +27,7 @@ use lantern::render::film::image_mean;
 use lantern::render::tonemap::{to_srgb8, ViewTransform};
 use lantern::scene::Method;
 use lantern::scene::Scene;
-use lantern::ui::backend::{Backend, Job, Snapshot, Worker};
+use lantern::session::{Backend, Job, Snapshot, Worker};
 use lantern::ui::viewport::heat;
 use wgpu::util::DeviceExt;
 

@@ -397,7 +397,7 @@ fn an_example_scene_opens_clean_and_follows_its_method() {
     h.run_steps(2);
     assert!(h.state().is_dirty());
     let (name, text) = lantern::ui::files::PRESETS[1];
-    lantern::ui::files::open_preset(h.state_mut(), name, text);
+    h.state_mut().open_preset(name, text);
     h.run_steps(2);
     let app = h.state();
     assert!(!app.is_dirty(), "a preset is not an unsaved change");
@@ -415,7 +415,7 @@ fn an_example_scene_opens_clean_and_follows_its_method() {
 /// choosing the CPU again removes the warning.
 #[test]
 fn choosing_the_gpu_without_one_falls_back_to_the_cpu_with_a_notice() {
-    use lantern::ui::backend::Backend;
+    use lantern::session::Backend;
     let mut h = harness();
     h.run_steps(2);
     assert_eq!(h.state().session.backend, Backend::Cpu);

@@ -4,8 +4,8 @@
 use glam::Vec3;
 use lantern::scene::Camera;
 use lantern::scene::Method;
+use lantern::session::StreamImage;
 use lantern::ui::app::{CompareMode, Session};
-use lantern::ui::backend::StreamImage;
 use lantern::ui::{files, viewport};
 
 fn stream(estimator: Method, value: Vec3, n: usize) -> StreamImage {

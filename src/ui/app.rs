@@ -11,165 +11,17 @@ use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use eframe::egui;
-use serde::{Deserialize, Serialize};
 
-use super::backend::{Backend, Job, Worker};
-use super::files::{self, Loaded};
-use super::viewport::{Display, NavState};
+use super::controls::ControlsState;
+use super::files::{self, FileMenuState, FileRequest, Loaded};
+use super::sky::SkyState;
+pub use super::state::{
+    latency_report, CompareMode, Document, LightQuantity, NavPreset, Session, Toast, SESSION_FILE,
+};
+use super::viewport::{Display, NavState, ViewportState};
 use super::LaunchOptions;
-use crate::render::tonemap::ViewTransform;
 use crate::scene::{Method, Scene};
-
-/// What is edited, saved and undone: the scene, with the method's
-/// settings in `scene.render`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Document {
-    /// The scene.
-    pub scene: Scene,
-}
-
-/// What the viewport shows.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub enum CompareMode {
-    /// The internal-lights image.
-    #[default]
-    Internal,
-    /// The reference image.
-    Reference,
-    /// Internal lights left of a draggable divider, reference right.
-    Split,
-    /// Per-pixel error of internal lights against the reference.
-    Error,
-}
-
-impl CompareMode {
-    /// The estimators the worker must run for this mode.
-    pub fn estimators(self) -> Vec<Method> {
-        match self {
-            CompareMode::Internal => vec![Method::Internal],
-            CompareMode::Reference => vec![Method::Reference],
-            CompareMode::Split | CompareMode::Error => {
-                vec![Method::Internal, Method::Reference]
-            }
-        }
-    }
-}
-
-/// Mouse bindings of the viewport camera.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub enum NavPreset {
-    /// Middle drag orbits, Shift+middle pans, Ctrl+middle or the wheel zooms.
-    #[default]
-    Blender,
-    /// Alt+left orbits, Alt+middle pans, Alt+right zooms (Maya, Houdini).
-    AltDrag,
-}
-
-/// Which quantity sizes and colours the internal-light gizmos.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub enum LightQuantity {
-    /// `F = G(s*) S₁`, the first gated term.
-    F,
-    /// `J`, the whole series.
-    #[default]
-    J,
-}
-
-/// Settings of the previewer that survive a restart (eframe's storage).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default)]
-pub struct Session {
-    /// The scene open when the previewer was closed.
-    pub last_scene: Option<PathBuf>,
-    /// Recently opened or saved scenes, newest first.
-    pub recent: Vec<PathBuf>,
-    /// Display exposure in stops.
-    pub exposure: f32,
-    /// Display view transform.
-    pub view: ViewTransform,
-    /// Camera mouse bindings.
-    pub nav: NavPreset,
-    /// Render resolution relative to the viewport's pixels.
-    pub res_scale: f32,
-    /// What the viewport shows.
-    pub compare: CompareMode,
-    /// Position of the split-view divider, 0 (left) to 1 (right).
-    pub split: f32,
-    /// Stop accumulating at this many samples per pixel.
-    pub max_spp: u32,
-    /// Draw the internal lights.
-    pub show_lights: bool,
-    /// Gizmo strength: F or J.
-    pub quantity: LightQuantity,
-    /// Gizmo strength on a log scale.
-    pub log_strength: bool,
-    /// Only the lights that contribute to the pixel under the cursor.
-    pub contributors_only: bool,
-    /// Draw the medium's box.
-    pub show_box: bool,
-    /// Draw the sun gizmo.
-    pub show_sun: bool,
-    /// EXR export adds the single-scatter and internal-light layers.
-    pub export_layers: bool,
-    /// Where to render: the GPU where one is available (the default),
-    /// else the CPU.
-    pub backend: Backend,
-}
-
-/// The session file's name, in eframe's storage folder for Lantern.
-pub const SESSION_FILE: &str = "session.ron";
-
-impl Session {
-    /// Where the session is kept: [`SESSION_FILE`] in eframe's storage
-    /// folder for Lantern (Linux: `~/.local/share/lantern/`), if the
-    /// platform has one.
-    pub fn path() -> Option<PathBuf> {
-        eframe::storage_dir("Lantern").map(|d| d.join(SESSION_FILE))
-    }
-
-    /// Reads a session file; `None` if it is missing, too large or not a
-    /// session (the previewer then starts from the defaults).
-    pub fn load(path: &Path) -> Option<Session> {
-        let text = crate::scene::read_text(path, 1 << 20, "session file").ok()?;
-        ron::from_str(&text).ok()
-    }
-
-    /// Writes the session whole or not at all (creating its folder): a
-    /// failed write keeps the previous session file.
-    pub fn save(&self, path: &Path) -> Result<(), String> {
-        let text = ron::ser::to_string_pretty(self, ron::ser::PrettyConfig::new())
-            .map_err(|e| format!("cannot write the session {}: {e}", path.display()))?;
-        if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir)
-                .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
-        }
-        crate::atomic::write_bytes(path, text.as_bytes()).map_err(|e| e.to_string())
-    }
-}
-
-impl Default for Session {
-    fn default() -> Self {
-        Self {
-            last_scene: None,
-            recent: Vec::new(),
-            exposure: 0.0,
-            view: ViewTransform::Filmic,
-            nav: NavPreset::Blender,
-            res_scale: 0.5,
-            compare: CompareMode::Internal,
-            split: 0.5,
-            max_spp: 1024,
-            show_lights: true,
-            quantity: LightQuantity::J,
-            log_strength: true,
-            contributors_only: false,
-            show_box: true,
-            show_sun: true,
-            export_layers: true,
-            backend: Backend::Gpu,
-        }
-    }
-}
+use crate::session::{Backend, Job, Worker};
 
 /// A scripted run: tests, the README screenshot and the latency measurement
 /// drive the real window through these (from environment variables).
@@ -243,17 +95,6 @@ pub enum GpuStatus {
     Ready(String),
     /// Why there is none (the CPU renders instead).
     Unavailable(String),
-}
-
-/// A message shown for a few seconds in the corner of the viewport.
-#[derive(Clone, Debug)]
-pub struct Toast {
-    /// The text.
-    pub text: String,
-    /// An error (red) rather than information.
-    pub error: bool,
-    /// When it appeared.
-    pub born: Instant,
 }
 
 /// Undo and redo of edits: snapshots of the document, recorded when an
@@ -523,22 +364,12 @@ impl LanternApp {
 
     /// Shows an information message.
     pub fn notify(&mut self, text: impl Into<String>) {
-        self.toasts.push(Toast {
-            text: text.into(),
-            error: false,
-            born: Instant::now(),
-        });
+        super::state::notify(&mut self.toasts, text);
     }
 
     /// Shows an error message.
     pub fn notify_error(&mut self, text: impl Into<String>) {
-        let text = text.into();
-        eprintln!("lantern: {text}");
-        self.toasts.push(Toast {
-            text,
-            error: true,
-            born: Instant::now(),
-        });
+        super::state::notify_error(&mut self.toasts, text);
     }
 
     /// Starts loading a scene (or a volume, wrapped in the current scene)
@@ -676,6 +507,57 @@ impl LanternApp {
         }
     }
 
+    /// Does what the File menu or a file dialog asked, if anything.
+    pub fn file_request(&mut self, request: Option<FileRequest>) {
+        match request {
+            None => {}
+            Some(FileRequest::Open(path)) => self.open(&path),
+            Some(FileRequest::Save(path)) => self.save_to(&path),
+            Some(FileRequest::Preset(name, text)) => self.open_preset(name, text),
+        }
+    }
+
+    /// Replaces the document with an example scene.
+    pub fn open_preset(&mut self, name: &str, text: &str) {
+        match files::preset_scene(name, text) {
+            Ok(scene) => {
+                self.replace_scene(scene, files::presets_dir());
+                self.path = None;
+                self.notify(format!("example scene: {name}"));
+            }
+            Err(e) => self.notify_error(e),
+        }
+    }
+
+    /// The side panel's part of the state.
+    fn controls_state(&mut self) -> ControlsState<'_> {
+        ControlsState {
+            backend_status: self.backend_status(),
+            active_backend: self.active_backend(),
+            lights: self.display.lights(),
+            doc: &mut self.doc,
+            session: &mut self.session,
+            sky: &mut self.sky,
+            scene_dir: &self.scene_dir,
+            path: self.path.as_deref(),
+            toasts: &mut self.toasts,
+            gpu_notice_shown: &mut self.gpu_notice_shown,
+            presented_ms: &self.presented_ms,
+            render_size: self.render_size,
+        }
+    }
+
+    /// The Sky section's part of the state.
+    pub fn sky_state(&mut self) -> SkyState<'_> {
+        SkyState {
+            doc: &mut self.doc,
+            sky: &mut self.sky,
+            scene_dir: &self.scene_dir,
+            path: self.path.as_deref(),
+            toasts: &mut self.toasts,
+        }
+    }
+
     /// Tells once (per choice of the GPU) that the GPU is unavailable.
     fn gpu_notice(&mut self) {
         if self.session.backend != Backend::Gpu {
@@ -728,8 +610,22 @@ impl LanternApp {
         egui::Panel::left("controls")
             .resizable(true)
             .default_size(330.0)
-            .show(ui, |ui| super::controls::panel_ui(ui, self));
-        egui::CentralPanel::no_frame().show(ui, |ui| super::viewport::viewport_ui(ui, self));
+            .show(ui, |ui| {
+                super::controls::panel_ui(ui, &mut self.controls_state())
+            });
+        egui::CentralPanel::no_frame().show(ui, |ui| {
+            super::viewport::viewport_ui(
+                ui,
+                &mut ViewportState {
+                    doc: &mut self.doc,
+                    session: &mut self.session,
+                    display: &self.display,
+                    nav: &mut self.nav,
+                    render_size: &mut self.render_size,
+                    forced_render_size: self.forced_render_size,
+                },
+            )
+        });
 
         // An edit ends when no mouse button is held.
         if !ctx.input(|i| i.pointer.any_down()) {
@@ -788,10 +684,10 @@ impl LanternApp {
                 .map(|f| f.path().to_owned())
                 .collect()
         });
-        super::sky::poll(self, ctx);
+        super::sky::poll(&mut self.sky_state(), ctx);
         if let Some(path) = dropped.first() {
             if super::sky::is_sky_map(path) {
-                super::sky::open_map(self, path);
+                super::sky::open_map(&mut self.sky_state(), path);
             } else if files::is_openable(path) {
                 self.open(path);
             } else {
@@ -818,16 +714,28 @@ impl LanternApp {
             self.undo();
         }
         if ctx.input_mut(|i| i.consume_shortcut(&open)) {
-            files::open_dialog(self);
+            self.file_request(files::open_dialog());
         }
         if ctx.input_mut(|i| i.consume_shortcut(&save)) {
-            files::save_dialog(self, false);
+            self.file_request(files::save_dialog(self.path.as_deref(), false));
         }
     }
 
     fn menu_ui(&mut self, ui: &mut egui::Ui) {
         egui::MenuBar::new().ui(ui, |ui| {
-            ui.menu_button("File", |ui| files::file_menu_ui(ui, self));
+            ui.menu_button("File", |ui| {
+                let request = files::file_menu_ui(
+                    ui,
+                    &mut FileMenuState {
+                        doc: &self.doc,
+                        session: &mut self.session,
+                        display: &self.display,
+                        path: self.path.as_deref(),
+                        toasts: &mut self.toasts,
+                    },
+                );
+                self.file_request(request);
+            });
             ui.menu_button("Edit", |ui| {
                 if ui
                     .add_enabled(self.history.can_undo(), egui::Button::new("Undo"))
@@ -895,7 +803,7 @@ impl LanternApp {
             ui.label("The scene has changes that are not saved. Quit anyway?");
             ui.horizontal(|ui| {
                 if ui.button("Save and quit").clicked() {
-                    files::save_dialog(self, false);
+                    self.file_request(files::save_dialog(self.path.as_deref(), false));
                     if !self.is_dirty() {
                         self.close_confirmed = true;
                         self.confirm_close = false;
@@ -1071,28 +979,6 @@ pub fn fps_report(frames: &[Instant]) -> String {
         at(0.5),
         at(0.95),
         at(1.0)
-    )
-}
-
-/// One line with the median and spread of measured latencies.
-pub fn latency_report(samples_ms: &[f64], size: [u32; 2], what: &str) -> String {
-    let mut s = samples_ms.to_vec();
-    s.sort_by(f64::total_cmp);
-    let median = if s.is_empty() {
-        f64::NAN
-    } else if s.len() % 2 == 1 {
-        s[s.len() / 2]
-    } else {
-        0.5 * (s[s.len() / 2 - 1] + s[s.len() / 2])
-    };
-    format!(
-        "lantern: slider-to-image latency at {}x{}, {what}: median {:.1} ms over {} changes (min {:.1}, max {:.1})",
-        size[0],
-        size[1],
-        median,
-        s.len(),
-        s.first().copied().unwrap_or(f64::NAN),
-        s.last().copied().unwrap_or(f64::NAN)
     )
 }
 

@@ -6,16 +6,21 @@
 //! Widgets edit the document directly; the frame loop notices the change,
 //! restarts the render and records the undo step.
 
+use std::path::Path;
+use std::sync::Arc;
+
 use eframe::egui::{self, Slider, Ui};
 use egui_plot::{Bar, BarChart, Plot};
 use glam::Vec3;
 
-use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset};
-use super::backend::Backend;
+use super::sky::{SkyState, SkyUi};
+use super::state::{CompareMode, Document, LightQuantity, NavPreset, Session, Toast};
+use super::widgets::rgb_intensity_ui;
 use crate::physics::sh::MAX_ORDER;
 use crate::render::tonemap::ViewTransform;
 use crate::scene::{Clock, L1Form, Quality};
 use crate::scene::{Light, Method};
+use crate::session::{Backend, LightsView};
 
 /// Label of the window-length slider (tests find widgets by label).
 pub const S_STAR: &str = "s* (window)";
@@ -40,8 +45,51 @@ pub const EXPERT: &str = "Expert: walks, lobes and kernel";
 /// Label of the density-scale slider.
 pub const DENSITY_SCALE: &str = "density scale";
 
+/// What the side panel edits and shows: narrow borrows of the previewer's
+/// state, and the few figures it displays.
+pub struct ControlsState<'a> {
+    /// The edited document.
+    pub doc: &'a mut Document,
+    /// The persisted session (view, comparison, backend choice).
+    pub session: &'a mut Session,
+    /// The Sky section's own state.
+    pub sky: &'a mut SkyUi,
+    /// The folder that the scene's relative paths refer to.
+    pub scene_dir: &'a Path,
+    /// The scene's file, if it has one.
+    pub path: Option<&'a Path>,
+    /// Notifications.
+    pub toasts: &'a mut Vec<Toast>,
+    /// Whether the user was told that the GPU is unavailable since they
+    /// last chose it (cleared when the backend choice changes).
+    pub gpu_notice_shown: &'a mut bool,
+    /// Where the image is rendered, in words.
+    pub backend_status: String,
+    /// The backend that rendered the image on screen.
+    pub active_backend: Backend,
+    /// The internal lights on screen, for the series-term plot.
+    pub lights: Option<Arc<LightsView>>,
+    /// Slider-to-screen latencies measured, in milliseconds.
+    pub presented_ms: &'a [f64],
+    /// The viewport's render size in pixels.
+    pub render_size: [u32; 2],
+}
+
+impl ControlsState<'_> {
+    /// The Sky section's part of the state.
+    fn sky_state(&mut self) -> SkyState<'_> {
+        SkyState {
+            doc: self.doc,
+            sky: self.sky,
+            scene_dir: self.scene_dir,
+            path: self.path,
+            toasts: self.toasts,
+        }
+    }
+}
+
 /// Draws the whole panel.
-pub fn panel_ui(ui: &mut Ui, app: &mut LanternApp) {
+pub fn panel_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     egui::ScrollArea::vertical().show(ui, |ui| {
         ui.heading("Internal lights");
         method_knobs_ui(ui, app);
@@ -57,7 +105,7 @@ pub fn panel_ui(ui: &mut Ui, app: &mut LanternApp) {
             .show(ui, |ui| lights_ui(ui, app));
         egui::CollapsingHeader::new(super::sky::SECTION)
             .default_open(false)
-            .show(ui, |ui| super::sky::sky_ui(ui, app));
+            .show(ui, |ui| super::sky::sky_ui(ui, &mut app.sky_state()));
         egui::CollapsingHeader::new("Render")
             .default_open(true)
             .show(ui, |ui| render_ui(ui, app));
@@ -95,7 +143,7 @@ fn optional_log_ui(
     });
 }
 
-fn method_knobs_ui(ui: &mut Ui, app: &mut LanternApp) {
+fn method_knobs_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     let internal = &mut app.doc.scene.render.internal;
     optional_log_ui(
         ui,
@@ -160,7 +208,7 @@ fn method_knobs_ui(ui: &mut Ui, app: &mut LanternApp) {
     }
 }
 
-fn medium_ui(ui: &mut Ui, app: &mut LanternApp) {
+fn medium_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     let m = &mut app.doc.scene.medium;
     ui.add(
         Slider::new(&mut m.density_scale, 0.01..=100.0)
@@ -213,7 +261,7 @@ fn medium_ui(ui: &mut Ui, app: &mut LanternApp) {
     }
 }
 
-fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
+fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     let s = &mut app.doc.scene.render.internal;
     ui.add(
         Slider::new(&mut s.walks, 1..=4096)
@@ -326,7 +374,7 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut LanternApp) {
     );
 }
 
-fn lights_ui(ui: &mut Ui, app: &mut LanternApp) {
+fn lights_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     let lights = &mut app.doc.scene.lights;
     let mut remove = None;
     for (i, light) in lights.iter_mut().enumerate() {
@@ -406,30 +454,8 @@ fn sun_direction_ui(ui: &mut Ui, direction: &mut Vec3) {
 /// The largest strength the sun's and the point lights' sliders reach.
 const LIGHT_STRENGTH_MAX: f32 = 1000.0;
 
-/// An RGB radiometric quantity as a colour and a logarithmic strength of
-/// at most `max` (the lights' and the sky's controls).
-pub(super) fn rgb_intensity_ui(ui: &mut Ui, value: &mut Vec3, label: &str, tip: &str, max: f32) {
-    let strength = value.max_element();
-    let tint = if strength > 0.0 {
-        *value / strength
-    } else {
-        Vec3::ONE
-    };
-    let mut rgb = [tint.x, tint.y, tint.z];
-    let mut s = strength;
-    ui.horizontal(|ui| {
-        let c = ui.color_edit_button_rgb(&mut rgb).on_hover_text(tip);
-        let r = ui
-            .add(Slider::new(&mut s, 0.0..=max).logarithmic(true).text(label))
-            .on_hover_text(tip);
-        if c.changed() || r.changed() {
-            *value = Vec3::from(rgb).max(Vec3::ZERO) * s;
-        }
-    });
-}
-
 /// The backend switch and a line saying where the image is rendered.
-fn backend_ui(ui: &mut Ui, app: &mut LanternApp) {
+fn backend_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     ui.horizontal(|ui| {
         ui.label("backend");
         let before = app.session.backend;
@@ -442,11 +468,11 @@ fn backend_ui(ui: &mut Ui, app: &mut LanternApp) {
         ui.selectable_value(&mut app.session.backend, Backend::Cpu, BACKEND_CPU)
             .on_hover_text("Render with the CPU renderers.");
         if app.session.backend != before {
-            app.gpu_notice_shown = false;
+            *app.gpu_notice_shown = false;
         }
     });
-    let status = app.backend_status();
-    let fallback = app.session.backend == Backend::Gpu && app.active_backend() == Backend::Cpu;
+    let status = app.backend_status.clone();
+    let fallback = app.session.backend == Backend::Gpu && app.active_backend == Backend::Cpu;
     let text = egui::RichText::new(status).small();
     ui.label(if fallback {
         text.color(ui.visuals().warn_fg_color)
@@ -455,7 +481,7 @@ fn backend_ui(ui: &mut Ui, app: &mut LanternApp) {
     });
 }
 
-fn render_ui(ui: &mut Ui, app: &mut LanternApp) {
+fn render_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     backend_ui(ui, app);
     let session = &mut app.session;
     ui.horizontal_wrapped(|ui| {
@@ -516,7 +542,7 @@ fn render_ui(ui: &mut Ui, app: &mut LanternApp) {
     });
 }
 
-fn view_ui(ui: &mut Ui, app: &mut LanternApp) {
+fn view_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     let s = &mut app.session;
     ui.add(Slider::new(&mut s.exposure, -10.0..=10.0).text(EXPOSURE))
         .on_hover_text("Display exposure: multiplies the shown image by 2^stops. Display only.");
@@ -570,7 +596,7 @@ fn view_ui(ui: &mut Ui, app: &mut LanternApp) {
     if !app.presented_ms.is_empty() {
         ui.label(
             egui::RichText::new(
-                super::app::latency_report(&app.presented_ms, app.render_size, "on screen")
+                super::state::latency_report(app.presented_ms, app.render_size, "on screen")
                     .trim_start_matches("lantern: ")
                     .to_string(),
             )
@@ -580,8 +606,8 @@ fn view_ui(ui: &mut Ui, app: &mut LanternApp) {
     }
 }
 
-fn terms_plot_ui(ui: &mut Ui, app: &mut LanternApp) {
-    let Some(lights) = app.display.lights() else {
+fn terms_plot_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
+    let Some(lights) = app.lights.clone() else {
         ui.label("The energy of each series term appears once internal lights are sampled.");
         return;
     };

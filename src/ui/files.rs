@@ -16,13 +16,14 @@ use std::sync::mpsc::{self, Receiver};
 use eframe::egui;
 use glam::Vec3;
 
-use super::app::LanternApp;
-use super::backend::Snapshot;
+use super::state::{notify, notify_error, Document, Session, Toast};
+use super::viewport::Display;
 use crate::atomic::write_atomically;
 use crate::render::export::{extension, write_png_bytes};
 use crate::render::tonemap::to_srgb8;
 use crate::render::Prepared;
 use crate::scene::{DensitySource, GridFormat, GridSource, Method, Scene};
+use crate::session::Snapshot;
 
 /// Largest number of recent files remembered.
 const RECENT_LIMIT: usize = 10;
@@ -157,117 +158,141 @@ pub fn push_recent(recent: &mut Vec<PathBuf>, path: &Path) {
     recent.truncate(RECENT_LIMIT);
 }
 
-/// Asks for a scene or volume to open.
-pub fn open_dialog(app: &mut LanternApp) {
-    let picked = rfd::FileDialog::new()
-        .add_filter("Scenes and volumes", &["ron", "vdb", "vol"])
-        .pick_file();
-    if let Some(path) = picked {
-        app.open(&path);
-    }
+/// What the File menu or a file dialog asks the application to do.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FileRequest {
+    /// Load this scene or volume (in the background).
+    Open(PathBuf),
+    /// Save the document to this file.
+    Save(PathBuf),
+    /// Replace the document with this example scene (name, RON text).
+    Preset(&'static str, &'static str),
 }
 
-/// Saves the scene: to its file, or (`save_as`, or no file yet) where the
-/// user says.
-pub fn save_dialog(app: &mut LanternApp, save_as: bool) {
-    let target = match (&app.path, save_as) {
-        (Some(p), false) => Some(p.clone()),
+/// What the File menu reads and edits: narrow borrows of the previewer's
+/// state.
+pub struct FileMenuState<'a> {
+    /// The edited document (for the export's metadata).
+    pub doc: &'a Document,
+    /// The persisted session (recent files, export options, display).
+    pub session: &'a mut Session,
+    /// The displayed image.
+    pub display: &'a Display,
+    /// Where the document was read from or last saved to.
+    pub path: Option<&'a Path>,
+    /// Notifications.
+    pub toasts: &'a mut Vec<Toast>,
+}
+
+/// Asks for a scene or volume to open.
+pub fn open_dialog() -> Option<FileRequest> {
+    rfd::FileDialog::new()
+        .add_filter("Scenes and volumes", &["ron", "vdb", "vol"])
+        .pick_file()
+        .map(FileRequest::Open)
+}
+
+/// Where to save the scene: to its file `path`, or (`save_as`, or no file
+/// yet) where the user says.
+pub fn save_dialog(path: Option<&Path>, save_as: bool) -> Option<FileRequest> {
+    let target = match (path, save_as) {
+        (Some(p), false) => Some(p.to_path_buf()),
         _ => rfd::FileDialog::new()
             .add_filter("Lantern scene", &["ron"])
             .set_file_name("scene.ron")
             .save_file(),
     };
-    if let Some(path) = target {
-        app.save_to(&path);
-    }
+    target.map(FileRequest::Save)
 }
 
-/// The File menu.
-pub fn file_menu_ui(ui: &mut egui::Ui, app: &mut LanternApp) {
+/// The File menu; returns what it asks the application to do.
+pub fn file_menu_ui(ui: &mut egui::Ui, state: &mut FileMenuState<'_>) -> Option<FileRequest> {
+    let mut request = None;
     if ui.button("Open…").clicked() {
         ui.close();
-        open_dialog(app);
+        request = open_dialog();
     }
     if ui.button("Save").clicked() {
         ui.close();
-        save_dialog(app, false);
+        request = save_dialog(state.path, false);
     }
     if ui.button("Save as…").clicked() {
         ui.close();
-        save_dialog(app, true);
+        request = save_dialog(state.path, true);
     }
     ui.menu_button("Open recent", |ui| {
-        if app.session.recent.is_empty() {
+        if state.session.recent.is_empty() {
             ui.label("(none)");
         }
         let mut chosen = None;
-        for p in &app.session.recent {
+        for p in &state.session.recent {
             if ui.button(p.display().to_string()).clicked() {
                 chosen = Some(p.clone());
             }
         }
         if let Some(p) = chosen {
             ui.close();
-            app.open(&p);
+            request = Some(FileRequest::Open(p));
         }
     });
     ui.menu_button("Example scenes", |ui| {
         for (name, text) in PRESETS {
             if ui.button(*name).clicked() {
                 ui.close();
-                open_preset(app, name, text);
+                request = Some(FileRequest::Preset(name, text));
             }
         }
     });
     ui.separator();
     ui.checkbox(
-        &mut app.session.export_layers,
+        &mut state.session.export_layers,
         "EXR: add single-scatter and internal-light layers",
     );
     if ui.button("Export EXR (linear, float)…").clicked() {
         ui.close();
-        export_dialog(app, "exr");
+        export_dialog(state, "exr");
     }
     if ui.button("Export PNG (as displayed)…").clicked() {
         ui.close();
-        export_dialog(app, "png");
+        export_dialog(state, "png");
     }
+    request
 }
 
-/// Replaces the document with an example scene.
-pub fn open_preset(app: &mut LanternApp, name: &str, text: &str) {
-    match Scene::from_ron(text, Path::new(name)) {
-        Ok(scene) => {
-            app.replace_scene(scene, presets_dir());
-            app.path = None;
-            app.notify(format!("example scene: {name}"));
-        }
-        Err(e) => app.notify_error(format!("{e:#}")),
-    }
+/// An example scene from its name and RON text.
+pub fn preset_scene(name: &str, text: &str) -> Result<Scene, String> {
+    Scene::from_ron(text, Path::new(name)).map_err(|e| format!("{e:#}"))
 }
 
-fn export_dialog(app: &mut LanternApp, ext: &str) {
+fn export_dialog(state: &mut FileMenuState<'_>, ext: &str) {
     let target = rfd::FileDialog::new()
         .add_filter(ext.to_uppercase(), &[ext])
         .set_file_name(format!("lantern.{ext}"))
         .save_file();
     if let Some(path) = target {
-        let result = app
+        let result = state
             .display
             .snapshot()
             .ok_or_else(|| "nothing rendered yet".to_string())
-            .and_then(|s| export(&path, &s, app));
+            .and_then(|s| export(&path, &s, state.doc, state.session, state.display));
         match result {
-            Ok(()) => app.notify(format!("exported {}", path.display())),
-            Err(e) => app.notify_error(e),
+            Ok(()) => notify(state.toasts, format!("exported {}", path.display())),
+            Err(e) => notify_error(state.toasts, e),
         }
     }
 }
 
-/// Writes the shown image: `.exr` linear with metadata and layers, `.png`
+/// Writes the shown image (of `display`, in `session`'s comparison mode):
+/// `.exr` linear with `doc`'s settings as metadata and layers, `.png`
 /// after the display transform.
-pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), String> {
-    let shown = app.display.shown_estimator(app.session.compare);
+pub fn export(
+    path: &Path,
+    snapshot: &Snapshot,
+    doc: &Document,
+    session: &Session,
+    display: &Display,
+) -> Result<(), String> {
+    let shown = display.shown_estimator(session.compare);
     let stream = snapshot
         .streams
         .iter()
@@ -279,7 +304,7 @@ pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), 
     let stream = stream.resolved()?;
     match extension(path).as_deref() {
         Some("exr") => {
-            let mut meta = render_metadata(app);
+            let mut meta = render_metadata(doc);
             meta.push(("spp".into(), stream.spp.to_string()));
             meta.push((
                 "method".into(),
@@ -289,7 +314,7 @@ pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), 
                 },
             ));
             let mut layers: Vec<(&str, &[Vec3])> = Vec::new();
-            if app.session.export_layers {
+            if session.export_layers {
                 if let Some(single) = &stream.single {
                     layers.push(("single", single));
                 }
@@ -307,7 +332,7 @@ pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), 
             )
         }
         Some("png") => {
-            let bytes = to_srgb8(&stream.mean, app.session.exposure, app.session.view);
+            let bytes = to_srgb8(&stream.mean, session.exposure, session.view);
             write_png_bytes(
                 path,
                 &bytes,
@@ -325,9 +350,9 @@ pub fn export(path: &Path, snapshot: &Snapshot, app: &LanternApp) -> Result<(), 
 }
 
 /// The render settings written into an EXR header.
-pub fn render_metadata(app: &LanternApp) -> Vec<(String, String)> {
-    let i = &app.doc.scene.render.internal;
-    let s = &app.doc.scene;
+pub fn render_metadata(doc: &Document) -> Vec<(String, String)> {
+    let i = &doc.scene.render.internal;
+    let s = &doc.scene;
     vec![
         (
             "lantern/s_star".into(),

@@ -2,26 +2,30 @@
 //! renderer that drives the renderers live.
 //!
 //! This is the only layer that knows egui, eframe or rfd. It sits on top of
-//! `render`, `cpu` and `scene`; [`backend`] is the single module that calls
-//! the renderers, on a worker thread, so that the UI never blocks on a pass.
+//! [`crate::session`], whose worker thread calls the renderers, so that the
+//! UI never blocks on a pass; it edits jobs and shows snapshots.
 //!
-//! - [`app`]: the application state, the frame loop, undo and the session.
+//! - [`app`]: the application, the frame loop, undo, scripted runs.
+//! - [`state`]: what the panels edit: the document, the session, the
+//!   notifications (no panel imports [`app`]).
 //! - [`controls`]: the side panel of parameters.
 //! - [`sky`]: the Sky section (environment light), its thumbnail, and
 //!   sky maps dropped on the window.
 //! - [`viewport`]: the progressive image, camera navigation, gizmos and the
 //!   comparisons (split view, error heatmap).
 //! - [`files`]: scene files, drag and drop, recent files and image export.
+//! - [`widgets`]: small widgets shared by the panels.
 //! - [`gpu_view`]: the GPU backend on the window's own device, and the
 //!   shown image as a texture written on the GPU.
 
 pub mod app;
-pub mod backend;
 pub mod controls;
 pub mod files;
 pub mod gpu_view;
 pub mod sky;
+pub mod state;
 pub mod viewport;
+pub mod widgets;
 
 use std::path::PathBuf;
 
@@ -36,32 +40,12 @@ pub struct LaunchOptions {
     pub script: Option<app::Script>,
 }
 
-/// How much lower (in nice steps) the render threads run than the UI.
-const RENDER_NICE_STEPS: i32 = 8;
-
-/// Lowers the calling thread's scheduling priority (Linux: the nice value
-/// is per thread), so that rendering yields the CPU to the UI thread.
-pub fn lower_thread_priority() {
-    #[cfg(target_os = "linux")]
-    // SAFETY: plain system calls on the calling thread's own id, with no
-    // pointers involved; failure only leaves the priority as it was.
-    unsafe {
-        let steps = std::env::var("LANTERN_RENDER_NICE")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(RENDER_NICE_STEPS);
-        let tid = libc::gettid() as libc::id_t;
-        let current = libc::getpriority(libc::PRIO_PROCESS, tid);
-        let _ = libc::setpriority(libc::PRIO_PROCESS, tid, (current + steps).min(19));
-    }
-}
-
 /// Opens the previewer window and runs until it is closed.
 pub fn run(options: LaunchOptions) -> anyhow::Result<()> {
     // Rendering runs on rayon's global pool: its threads run below the UI.
     let _ = rayon::ThreadPoolBuilder::new()
         .thread_name(|i| format!("lantern-pass-{i}"))
-        .start_handler(|_| lower_thread_priority())
+        .start_handler(|_| crate::session::lower_thread_priority())
         .build_global();
     let native = eframe::NativeOptions {
         viewport: eframe::egui::ViewportBuilder::default()

@@ -30,7 +30,7 @@ use std::time::Duration;
 use eframe::egui::{self, Color32, Pos2, Rect, Sense, Slider, Stroke, TextureHandle, Ui, Vec2};
 use glam::Vec3;
 
-use super::app::LanternApp;
+use super::state::{Document, Toast};
 use crate::render::export::extension;
 use crate::render::tonemap::{to_srgb8, ViewTransform};
 use crate::scene::environment::{load_sky_map, map_direction};
@@ -120,10 +120,36 @@ pub fn is_sky_map(path: &Path) -> bool {
     matches!(extension(path).as_deref(), Some("exr" | "hdr"))
 }
 
+/// What the Sky section edits: narrow borrows of the previewer's state.
+pub struct SkyState<'a> {
+    /// The edited document (its environment).
+    pub doc: &'a mut Document,
+    /// The section's own state (map being read, last choices, thumbnail).
+    pub sky: &'a mut SkyUi,
+    /// The folder that the scene's relative paths refer to.
+    pub scene_dir: &'a Path,
+    /// The scene's file, if it has one (for messages).
+    pub path: Option<&'a Path>,
+    /// Notifications.
+    pub toasts: &'a mut Vec<Toast>,
+}
+
+impl SkyState<'_> {
+    /// Shows an information message.
+    pub fn notify(&mut self, text: impl Into<String>) {
+        super::state::notify(self.toasts, text);
+    }
+
+    /// Shows an error message.
+    pub fn notify_error(&mut self, text: impl Into<String>) {
+        super::state::notify_error(self.toasts, text);
+    }
+}
+
 /// Starts reading the map at `path` on a background thread; once it loads
 /// it becomes the sky (rotation 0, scale 1) as one undoable edit
 /// ([`poll`]), otherwise the loader's error is shown.
-pub fn open_map(app: &mut LanternApp, path: &Path) {
+pub fn open_map(app: &mut SkyState<'_>, path: &Path) {
     let (tx, rx) = mpsc::channel();
     let file = path.to_owned();
     let spawned = std::thread::Builder::new()
@@ -142,7 +168,7 @@ pub fn open_map(app: &mut LanternApp, path: &Path) {
 
 /// Applies a map that finished loading (or reports why it did not); called
 /// once per frame.
-pub fn poll(app: &mut LanternApp, ctx: &egui::Context) {
+pub fn poll(app: &mut SkyState<'_>, ctx: &egui::Context) {
     let Some((path, rx)) = &app.sky.pending_map else {
         return;
     };
@@ -161,7 +187,7 @@ pub fn poll(app: &mut LanternApp, ctx: &egui::Context) {
     app.sky.pending_map = None;
     match result {
         Ok(()) => {
-            let file = relative_path(&path, &app.scene_dir);
+            let file = relative_path(&path, app.scene_dir);
             set_sky(
                 app,
                 Sky::Map {
@@ -178,7 +204,7 @@ pub fn poll(app: &mut LanternApp, ctx: &egui::Context) {
 }
 
 /// Sets the sky, keeping the background setting.
-fn set_sky(app: &mut LanternApp, sky: Sky) {
+fn set_sky(app: &mut SkyState<'_>, sky: Sky) {
     let background = app
         .doc
         .scene
@@ -208,7 +234,7 @@ fn kind_of(env: &Option<Environment>) -> Kind {
 
 /// The error the scene loader gives for a clear sky in this scene (it has
 /// no sun), if any.
-fn clear_sky_error(app: &LanternApp) -> Option<String> {
+fn clear_sky_error(app: &SkyState<'_>) -> Option<String> {
     let env = Environment {
         sky: Sky::ClearSky {
             turbidity: 3.0,
@@ -218,15 +244,14 @@ fn clear_sky_error(app: &LanternApp) -> Option<String> {
     };
     let name = app
         .path
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("the scene"));
+        .map_or_else(|| PathBuf::from("the scene"), Path::to_path_buf);
     env.validate(&name, app.doc.scene.first_sun())
         .err()
         .map(|e| format!("{:#}", anyhow::Error::from(e)))
 }
 
 /// Draws the section.
-pub fn sky_ui(ui: &mut Ui, app: &mut LanternApp) {
+pub fn sky_ui(ui: &mut Ui, app: &mut SkyState<'_>) {
     let current = kind_of(&app.doc.scene.environment);
     if app
         .sky
@@ -308,7 +333,7 @@ pub fn sky_ui(ui: &mut Ui, app: &mut LanternApp) {
 }
 
 /// Switches the kind of sky, remembering the settings of the one left.
-fn choose(app: &mut LanternApp, current: Kind, chosen: Kind) {
+fn choose(app: &mut SkyState<'_>, current: Kind, chosen: Kind) {
     if let Some(env) = &app.doc.scene.environment {
         match &env.sky {
             Sky::Constant { radiance } => app.sky.last_constant = Some(*radiance),
@@ -344,7 +369,7 @@ fn choose(app: &mut LanternApp, current: Kind, chosen: Kind) {
 
 /// The constant sky's radiance as a colour and a logarithmic strength.
 fn radiance_ui(ui: &mut Ui, value: &mut Vec3) {
-    super::controls::rgb_intensity_ui(
+    super::widgets::rgb_intensity_ui(
         ui,
         value,
         RADIANCE,
@@ -356,7 +381,7 @@ fn radiance_ui(ui: &mut Ui, value: &mut Vec3) {
 }
 
 /// The map's file line: the path and the button that opens the dialog.
-fn map_file_ui(ui: &mut Ui, app: &mut LanternApp, file: Option<&Path>) {
+fn map_file_ui(ui: &mut Ui, app: &mut SkyState<'_>, file: Option<&Path>) {
     ui.horizontal_wrapped(|ui| {
         let busy = app.sky.is_loading_map();
         if ui
@@ -383,7 +408,7 @@ fn map_file_ui(ui: &mut Ui, app: &mut LanternApp, file: Option<&Path>) {
     });
 }
 
-fn map_ui(ui: &mut Ui, app: &mut LanternApp) {
+fn map_ui(ui: &mut Ui, app: &mut SkyState<'_>) {
     let Some(Environment {
         sky:
             Sky::Map {
@@ -421,7 +446,7 @@ fn map_ui(ui: &mut Ui, app: &mut LanternApp) {
     }
 }
 
-fn clear_ui(ui: &mut Ui, app: &mut LanternApp, no_sun: Option<&str>) {
+fn clear_ui(ui: &mut Ui, app: &mut SkyState<'_>, no_sun: Option<&str>) {
     let Some(Environment {
         sky: Sky::ClearSky {
             mut turbidity,
@@ -472,12 +497,12 @@ fn clear_ui(ui: &mut Ui, app: &mut LanternApp, no_sun: Option<&str>) {
 }
 
 /// The source of the current sky's thumbnail, if it has one.
-fn source(app: &LanternApp) -> Option<Source> {
+fn source(app: &SkyState<'_>) -> Option<Source> {
     match app.doc.scene.environment.as_ref().map(|e| &e.sky)? {
         Sky::Constant { .. } => None,
         Sky::Map { file, .. } => Some(Source::Map {
             file: file.clone(),
-            dir: app.scene_dir.clone(),
+            dir: app.scene_dir.to_path_buf(),
         }),
         Sky::ClearSky { turbidity, .. } => Some(Source::Clear {
             turbidity: *turbidity,
@@ -525,7 +550,7 @@ fn load_in_background(source: Source) -> Option<Receiver<LoadResult>> {
 }
 
 /// The thumbnail with the sun circled, or the loader's error.
-fn thumbnail_ui(ui: &mut Ui, app: &mut LanternApp) {
+fn thumbnail_ui(ui: &mut Ui, app: &mut SkyState<'_>) {
     let Some(wanted) = source(app) else {
         return;
     };

@@ -11,10 +11,10 @@ use std::sync::Arc;
 use eframe::egui::{self, Color32, Pos2, Rect, Sense, Stroke, TextureHandle, Ui, Vec2};
 use glam::Vec3;
 
-use super::app::{CompareMode, LanternApp, LightQuantity, NavPreset, Session};
-use super::backend::{LightsView, Snapshot, StreamImage};
+use super::state::{CompareMode, Document, LightQuantity, NavPreset, Session};
 use crate::render::tonemap::to_srgb8;
 use crate::scene::{Camera, CameraFrame, Light, Method, Scene};
+use crate::session::{LightsView, Snapshot, StreamImage};
 
 /// The image on screen: the snapshot it was made from and its textures.
 ///
@@ -266,14 +266,8 @@ pub fn heat(t: f32) -> Color32 {
 /// and channels, and the reference's mean.
 pub fn error_heatmap(a: &StreamImage, b: &StreamImage) -> (egui::ColorImage, f32, f32) {
     let n = a.mean.len().max(1) as f64;
-    let mut sq = 0.0f64;
-    let mut ref_sum = 0.0f64;
-    for (x, y) in a.mean.iter().zip(&b.mean) {
-        let d = *x - *y;
-        sq += (d.length_squared() / 3.0) as f64;
-        ref_sum += (y.element_sum() / 3.0) as f64;
-    }
-    let rmse = (sq / n).sqrt() as f32;
+    let ref_sum: f64 = b.mean.iter().map(|y| (y.element_sum() / 3.0) as f64).sum();
+    let rmse = crate::render::stats::rmse(&a.mean, &b.mean) as f32;
     let mean = (ref_sum / n) as f32;
     let scale = if mean > 0.0 { 1.0 / mean } else { 1.0 };
     let pixels = a
@@ -354,8 +348,32 @@ pub fn frame_volume(scene: &mut Scene, aspect: f32) {
     }
 }
 
+/// What the viewport edits and shows: narrow borrows of the previewer's
+/// state.
+pub struct ViewportState<'a> {
+    /// The edited document (camera, sun).
+    pub doc: &'a mut Document,
+    /// The persisted session (comparison, split, gizmos, mouse bindings).
+    pub session: &'a mut Session,
+    /// The displayed image and its texture.
+    pub display: &'a Display,
+    /// Camera-navigation state.
+    pub nav: &'a mut NavState,
+    /// The render size in pixels, set here from the viewport's size.
+    pub render_size: &'a mut [u32; 2],
+    /// Render at this size whatever the viewport's (scripted runs).
+    pub forced_render_size: Option<[u32; 2]>,
+}
+
+impl ViewportState<'_> {
+    /// Width over height of the render.
+    pub fn render_aspect(&self) -> f32 {
+        self.render_size[0] as f32 / self.render_size[1].max(1) as f32
+    }
+}
+
 /// The camera frame of the document's camera at the render size.
-fn frame_of(app: &LanternApp) -> CameraFrame {
+fn frame_of(app: &ViewportState<'_>) -> CameraFrame {
     let mut cam = app.doc.scene.camera.clone();
     cam.width = app.render_size[0].max(1);
     cam.height = app.render_size[1].max(1);
@@ -363,12 +381,12 @@ fn frame_of(app: &LanternApp) -> CameraFrame {
 }
 
 /// Draws the viewport and handles its input.
-pub fn viewport_ui(ui: &mut Ui, app: &mut LanternApp) {
+pub fn viewport_ui(ui: &mut Ui, app: &mut ViewportState<'_>) {
     let rect = ui.available_rect_before_wrap();
     let response = ui.allocate_rect(rect, Sense::click_and_drag());
     let ppp = ui.ctx().pixels_per_point();
     let scale = app.session.res_scale.clamp(0.05, 1.0);
-    app.render_size = app.forced_render_size.unwrap_or([
+    *app.render_size = app.forced_render_size.unwrap_or([
         ((rect.width() * ppp * scale).round() as u32).clamp(8, 8192),
         ((rect.height() * ppp * scale).round() as u32).clamp(8, 8192),
     ]);
@@ -495,7 +513,7 @@ fn camera_axes(frame: &CameraFrame) -> (Vec3, Vec3, Vec3) {
 
 fn sun_gizmo(
     painter: &egui::Painter,
-    app: &LanternApp,
+    app: &ViewportState<'_>,
     rect: Rect,
     frame: &CameraFrame,
     bounds: Option<(Vec3, Vec3)>,
@@ -568,7 +586,7 @@ fn drag_sun(lights: &mut [Light], frame: &CameraFrame, rect: Rect, pos: Pos2) {
     }
 }
 
-fn split_divider_ui(ui: &mut Ui, app: &mut LanternApp, rect: Rect) {
+fn split_divider_ui(ui: &mut Ui, app: &mut ViewportState<'_>, rect: Rect) {
     if app.session.compare != CompareMode::Split {
         return;
     }
@@ -612,7 +630,7 @@ const MAX_DRAWN_LIGHTS: usize = 1500;
 
 fn lights_gizmos_ui(
     ui: &mut Ui,
-    app: &mut LanternApp,
+    app: &mut ViewportState<'_>,
     rect: Rect,
     frame: &CameraFrame,
     to_screen: &dyn Fn(Vec3) -> Option<Pos2>,
@@ -814,7 +832,7 @@ fn light_tooltip(ui: &Ui, lights: &LightsView, i: usize, frame: &CameraFrame) {
 /// Camera and sun dragging, wheel zoom and the F key.
 fn navigate(
     ui: &mut Ui,
-    app: &mut LanternApp,
+    app: &mut ViewportState<'_>,
     response: &egui::Response,
     rect: Rect,
     frame: &CameraFrame,
@@ -902,7 +920,7 @@ pub fn zoom(cam: &mut Camera, amount: f32) {
     }
 }
 
-fn overlay_ui(painter: &egui::Painter, app: &LanternApp, rect: Rect) {
+fn overlay_ui(painter: &egui::Painter, app: &ViewportState<'_>, rect: Rect) {
     let Some(snapshot) = app.display.snapshot() else {
         painter.text(
             rect.center(),

@@ -79,56 +79,7 @@ pub fn gather_cpu(
     film
 }
 
-/// The outcome of comparing two noisy images.
-#[derive(Debug)]
-pub struct Comparison {
-    /// Image mean of the first image, per channel.
-    pub mean_a: Vec3,
-    /// Image mean of the second image, per channel.
-    pub mean_b: Vec3,
-    /// Relative difference of the means, per channel.
-    pub rel_mean_diff: Vec3,
-    /// Fraction of pixel channels whose |z| is below the threshold.
-    pub z_pass_fraction: f64,
-    /// RMSE of a against b, relative to b's mean (over channels).
-    pub rel_rmse: f64,
-}
-
-/// Compares image `a` (variance of its mean per pixel `var_a`) with `b`
-/// (`var_b`): per-pixel z = (a − b)/√(var_a + var_b), passing where |z| <
-/// `z_max` (pixels where both variances vanish pass if they agree closely).
-pub fn compare(a: &[Vec3], var_a: &[Vec3], b: &[Vec3], var_b: &[Vec3], z_max: f32) -> Comparison {
-    assert_eq!(a.len(), b.len());
-    let mean_a = image_mean(a);
-    let mean_b = image_mean(b);
-    let rel_mean_diff = (mean_a - mean_b).abs() / mean_b.max(Vec3::splat(1e-12));
-    let mut pass = 0usize;
-    let mut total = 0usize;
-    let mut se = 0.0f64;
-    for i in 0..a.len() {
-        for c in 0..3 {
-            let d = a[i][c] - b[i][c];
-            se += (d as f64).powi(2);
-            let s = (var_a[i][c] + var_b[i][c]).sqrt();
-            let ok = if s > 0.0 {
-                (d / s).abs() < z_max
-            } else {
-                d.abs() <= 1e-6 * (1.0 + b[i][c].abs())
-            };
-            pass += ok as usize;
-            total += 1;
-        }
-    }
-    let rmse = (se / total as f64).sqrt();
-    let mb = (mean_b.x + mean_b.y + mean_b.z) as f64 / 3.0;
-    Comparison {
-        mean_a,
-        mean_b,
-        rel_mean_diff,
-        z_pass_fraction: pass as f64 / total as f64,
-        rel_rmse: rmse / mb.max(1e-12),
-    }
-}
+pub use lantern::render::stats::compare_noisy as compare;
 
 /// Where failing tests leave images to look at.
 pub fn output_dir() -> PathBuf {

@@ -1,4 +1,5 @@
-//! The one module of the previewer that talks to the renderers.
+//! The previewer's render session: the one place the previewer's
+//! renderers run (moved here from `ui::backend`; no egui).
 //!
 //! A worker thread owns the renderers and the progressive films; the UI
 //! thread sends it a [`Job`] whenever anything that changes the picture
@@ -35,35 +36,16 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 
+use super::{renew_gpu_lights, Backend, LightBuilder, Renewal};
 use crate::cpu::Renderer;
 use crate::gpu::display::{read_accum, DisplayPass, ImageStats};
 use crate::gpu::{GpuContext, GpuError, GpuRenderer};
 use crate::physics::gated_walk::Clock;
 use crate::physics::internal::InternalLights;
-use crate::render::{internal_params_for_set, light_set_starting, Film, Prepared};
+use crate::render::{Film, Prepared};
 use crate::scene::{Density, DensitySource, Method, Scene};
 
 pub use crate::scene::InternalSettings;
-
-/// Where the passes run.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Backend {
-    /// wgpu compute shaders, on the device the window uses.
-    #[default]
-    Gpu,
-    /// The CPU renderers (rayon).
-    Cpu,
-}
-
-impl Backend {
-    /// "GPU" or "CPU".
-    pub fn name(self) -> &'static str {
-        match self {
-            Backend::Gpu => "GPU",
-            Backend::Cpu => "CPU",
-        }
-    }
-}
 
 /// Everything that determines the picture.
 #[derive(Clone, Debug, PartialEq)]
@@ -849,22 +831,20 @@ impl JobContext<'_> {
         if let Some(c) = self.newer() {
             return Ok(Some(c));
         }
-        let internal_settings = settings_for(job, Method::Internal);
         for pass in 0..job.max_spp {
             if self.cancel.load(Ordering::Relaxed) {
                 return Ok(self.next_command());
             }
             let start = Instant::now();
-            let renew = light_set_starting(&internal_settings, pass);
             for (e, engine) in engines.iter_mut() {
-                if let (Method::Internal, Some(set)) = (*e, renew) {
-                    // A fresh light set (built on the CPU, as the first).
-                    let params = internal_params_for_set(prepared, &internal_settings, set);
-                    let Some(lights) = prepared.build_internal_lights(&params, self.cancel) else {
-                        return Ok(self.next_command());
-                    };
-                    engine
-                        .set_internal_lights(&lights, internal_settings.internal.light_samples)?;
+                // A fresh light set when the pass starts one (built on the
+                // CPU, as the first).
+                let settings = settings_for(job, *e);
+                let builder = LightBuilder::Cpu(self.cancel);
+                if renew_gpu_lights(engine, prepared, &settings, pass, builder)?
+                    == Renewal::Cancelled
+                {
+                    return Ok(self.next_command());
                 }
                 engine.add_pass(pass);
             }

@@ -18,7 +18,7 @@
 //! it never did.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -26,14 +26,15 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
 
-use crate::cli::InternalArgs;
+use super::args::InternalArgs;
+use super::support::{load_square, output_dir, render_timed, renewal_text, variance_path};
 use crate::cpu::Renderer;
 use crate::render::export::{read_exr, write_exr};
 use crate::render::film::image_mean;
 use crate::render::plot::{Plot, Series};
+use crate::render::stats::rmse_against;
 use crate::render::{Film, Prepared};
 use crate::scene::{Method, RenderSettings};
-use crate::validate::{load_square, output_dir, render_timed};
 
 /// Options of `lantern converge`.
 #[derive(Clone, Debug, clap::Args)]
@@ -83,84 +84,6 @@ pub struct Checkpoint {
     pub spp: u32,
     /// RMSE relative to the converged image's mean, its noise removed.
     pub rmse: f32,
-}
-
-/// RMSE of `image` against `converged` relative to the converged mean,
-/// with the converged image's own noise (`converged_var`, the variance of
-/// its per-pixel mean) removed from the mean squared error (clamped at 0).
-pub fn rmse_against(image: &[Vec3], converged: &[Vec3], converged_var: &[Vec3]) -> f32 {
-    let n = image.len().max(1) as f64 * 3.0;
-    let mut se = 0.0f64;
-    let mut var = 0.0f64;
-    let mut sum = 0.0f64;
-    for ((a, b), v) in image.iter().zip(converged).zip(converged_var) {
-        for c in 0..3 {
-            se += ((a[c] - b[c]) as f64).powi(2);
-            var += v[c] as f64;
-            sum += b[c] as f64;
-        }
-    }
-    let mean = (sum / n).max(1e-30);
-    (((se - var) / n).max(0.0).sqrt() / mean) as f32
-}
-
-/// Side of the blocks of [`block_rmse_against`], in pixels.
-pub const BLOCK: usize = 8;
-
-/// [`rmse_against`] of the images' [`BLOCK`]×[`BLOCK`] block means (blocks
-/// from the top-left corner; a partial block at the right or bottom edge is
-/// left out), relative to the converged image's mean over those blocks:
-/// how far the image is off at the scale of a block, its pixel noise
-/// averaged down. The converged image's noise is removed as the variance
-/// of its block means, `Σ Var[pixel] / BLOCK⁴` (independent pixels).
-pub fn block_rmse_against(
-    image: &[Vec3],
-    converged: &[Vec3],
-    converged_var: &[Vec3],
-    width: usize,
-    height: usize,
-) -> f32 {
-    let means = |img: &[Vec3], scale: f32| {
-        let (bw, bh) = (width / BLOCK, height / BLOCK);
-        let mut out = vec![Vec3::ZERO; bw * bh];
-        for (b, o) in out.iter_mut().enumerate() {
-            let (x0, y0) = ((b % bw) * BLOCK, (b / bw) * BLOCK);
-            for y in y0..y0 + BLOCK {
-                for x in x0..x0 + BLOCK {
-                    *o += img[y * width + x];
-                }
-            }
-            *o *= scale;
-        }
-        out
-    };
-    let n = (BLOCK * BLOCK) as f32;
-    rmse_against(
-        &means(image, 1.0 / n),
-        &means(converged, 1.0 / n),
-        &means(converged_var, 1.0 / (n * n)),
-    )
-}
-
-/// Where a converged image's per-pixel variance of the mean is read from:
-/// `NAME_var.exr` beside `NAME.exr` (`converged.exr` → `converged_var.exr`,
-/// as `converge` writes them; `tests/data/suite/NAME_var.exr`, as
-/// `tests/suite/make_references.sh` writes them).
-pub fn variance_path(converged: &Path) -> PathBuf {
-    let stem = converged
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    converged.with_file_name(format!("{stem}_var.exr"))
-}
-
-/// How often a render renews its internal lights, in words (the reports'
-/// settings line).
-pub fn renewal_text(resample_every: u32) -> String {
-    match resample_every {
-        0 => "one light set".to_owned(),
-        p => format!("a fresh light set every {p} passes"),
-    }
 }
 
 /// What a pair of independent renders `a1`, `a2` (same settings, other
@@ -642,86 +565,6 @@ mod tests {
             .filter(|&spp| checkpoint_due(&mut next, spp))
             .collect();
         assert_eq!(due, [1, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64]);
-    }
-
-    #[test]
-    fn converged_noise_is_removed_from_the_rmse() {
-        let converged = vec![Vec3::splat(1.0); 4];
-        // Errors of ±0.1 everywhere: RMSE 0.1; a converged variance of
-        // 0.0064 explains 0.08² of it, leaving 0.06.
-        let image: Vec<Vec3> = (0..4)
-            .map(|i| Vec3::splat(if i % 2 == 0 { 1.1 } else { 0.9 }))
-            .collect();
-        let none = vec![Vec3::ZERO; 4];
-        assert!((rmse_against(&image, &converged, &none) - 0.1).abs() < 1e-6);
-        let var = vec![Vec3::splat(0.0064); 4];
-        assert!((rmse_against(&image, &converged, &var) - 0.06).abs() < 1e-5);
-        // Never negative.
-        assert_eq!(rmse_against(&converged, &converged, &var), 0.0);
-    }
-
-    /// The block RMSE compares 8×8 blocks from the top-left corner: a ±0.2
-    /// error on a 4×4 checkerboard cancels in every block (4×4 or 1×1
-    /// blocks would see it), one on an 8×8 checkerboard is the whole block
-    /// error (16×16 blocks, or 8×8 ones offset by 4, would average it
-    /// away), a partial block at the edge is left out, and the converged
-    /// image's block variance `Σ Var / 64²` is removed; the per-pixel RMSE
-    /// sees both checkerboards alike.
-    #[test]
-    fn block_rmse_uses_eight_by_eight_blocks() {
-        let (w, h) = (36, 24);
-        let converged = vec![Vec3::splat(2.0); w * h];
-        let none = vec![Vec3::ZERO; w * h];
-        let checker = |tile: usize| -> Vec<Vec3> {
-            (0..w * h)
-                .map(|i| {
-                    let (x, y) = (i % w, i / w);
-                    if x >= 32 {
-                        return Vec3::splat(50.0); // the partial block column
-                    }
-                    let sign = if (x / tile + y / tile).is_multiple_of(2) {
-                        1.0
-                    } else {
-                        -1.0
-                    };
-                    Vec3::splat(2.0 + 0.2 * sign)
-                })
-                .collect()
-        };
-        let (fine, coarse) = (checker(4), checker(8));
-        assert!(block_rmse_against(&fine, &converged, &none, w, h).abs() < 1e-6);
-        let b = block_rmse_against(&coarse, &converged, &none, w, h);
-        assert!((b - 0.1).abs() < 1e-5, "{b}");
-        // Per pixel (the partial column left out too): 0.2 / 2 for both.
-        let crop = |img: &[Vec3]| -> Vec<Vec3> {
-            img.iter()
-                .enumerate()
-                .filter(|(i, _)| i % w < 32)
-                .map(|(_, v)| *v)
-                .collect()
-        };
-        let (c, z) = (crop(&converged), vec![Vec3::ZERO; 32 * h]);
-        for img in [&fine, &coarse] {
-            assert!((rmse_against(&crop(img), &c, &z) - 0.1).abs() < 1e-5);
-        }
-        // A block variance of 0.16² (per pixel 64 × 0.16²) leaves
-        // √(0.2² − 0.16²) = 0.12 of the block error: 0.06 of the mean.
-        let var = vec![Vec3::splat(64.0 * 0.16 * 0.16); w * h];
-        let b = block_rmse_against(&coarse, &converged, &var, w, h);
-        assert!((b - 0.06).abs() < 1e-4, "{b}");
-    }
-
-    #[test]
-    fn variance_beside_the_converged_image() {
-        let p = Path::new("tests/data/suite/chromatic.exr");
-        assert_eq!(
-            variance_path(p),
-            Path::new("tests/data/suite/chromatic_var.exr")
-        );
-        assert_eq!(
-            variance_path(Path::new("out/converged.exr")),
-            Path::new("out/converged_var.exr")
-        );
     }
 
     /// End to end at 16² with a short budget: both curves are written, and

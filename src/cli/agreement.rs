@@ -1,4 +1,4 @@
-//! `lantern validate`: how close the internal-lights method comes to the
+//! `lantern validate`, the agreement of the two estimators: how close the internal-lights method comes to the
 //! reference, and how the error moves with `s*`, `N` and `M` ([method §7](crate::doc::method)).
 //!
 //! Renders the reference at a high sample count, then the internal-lights
@@ -10,19 +10,18 @@
 //! errors per sweep into the output folder.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::AtomicBool;
+use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
 
-use crate::cli::{load_prepared, InternalArgs};
-use crate::cpu::Renderer;
+use super::args::InternalArgs;
+use super::support::{load_square, output_dir, render_timed};
 use crate::render::export::write_exr;
+use crate::render::internal_params;
 use crate::render::plot::{Plot, Series};
-use crate::render::{internal_params, Film, Prepared};
+use crate::render::stats::compare;
 use crate::scene::{Method, RenderSettings};
 
 /// Options of `lantern validate`.
@@ -77,77 +76,6 @@ pub struct Row {
     pub resample_secs: f64,
     /// Seconds to gather all passes.
     pub gather_secs: f64,
-}
-
-/// Relative mean error per channel and relative RMSE of `image` against
-/// `reference`.
-pub fn compare(image: &[Vec3], reference: &[Vec3]) -> (Vec3, f32) {
-    let n = image.len().max(1) as f64;
-    let mut mi = [0.0f64; 3];
-    let mut mr = [0.0f64; 3];
-    let mut se = 0.0f64;
-    for (a, b) in image.iter().zip(reference) {
-        for c in 0..3 {
-            mi[c] += a[c] as f64;
-            mr[c] += b[c] as f64;
-            se += ((a[c] - b[c]) as f64).powi(2);
-        }
-    }
-    let err = Vec3::new(
-        ((mi[0] - mr[0]) / mr[0].max(1e-30)) as f32,
-        ((mi[1] - mr[1]) / mr[1].max(1e-30)) as f32,
-        ((mi[2] - mr[2]) / mr[2].max(1e-30)) as f32,
-    );
-    let mean_ref = (mr[0] + mr[1] + mr[2]) / (3.0 * n);
-    let rmse = ((se / (3.0 * n)).sqrt() / mean_ref.max(1e-30)) as f32;
-    (err, rmse)
-}
-
-/// Renders `spp` passes with `settings`; returns the image and the times
-/// to build and to gather.
-pub fn render_timed(
-    prepared: &Arc<Prepared>,
-    settings: &RenderSettings,
-    spp: u32,
-) -> Result<(Vec<Vec3>, f64, f64)> {
-    let never = AtomicBool::new(false);
-    let start = Instant::now();
-    let renderer =
-        Renderer::new(prepared.clone(), settings, &never).context("render was cancelled")?;
-    let build = start.elapsed().as_secs_f64();
-    let start = Instant::now();
-    let cam = prepared.camera;
-    let mut film = Film::new(cam.width, cam.height);
-    for pass in 0..spp {
-        let img = renderer
-            .pass(pass, &never)
-            .context("render was cancelled")?;
-        film.add_pass(&img.total);
-    }
-    Ok((film.mean(), build, start.elapsed().as_secs_f64()))
-}
-
-/// Loads and prepares `scene` with its image resized to `size`² pixels
-/// (0 keeps the scene's camera size).
-pub fn load_square(scene: &Path, size: u32) -> Result<Prepared> {
-    let prepared = load_prepared(scene)?;
-    let (w, h) = if size == 0 {
-        (prepared.camera.width, prepared.camera.height)
-    } else {
-        (size, size)
-    };
-    crate::render::limits::check_image_fits(w, h, "--size").map_err(anyhow::Error::msg)?;
-    if size == 0 {
-        return Ok(prepared);
-    }
-    let mut resized = prepared.scene.clone();
-    resized.camera.width = size;
-    resized.camera.height = size;
-    resized.validate(scene)?;
-    Ok(Prepared::with_density(
-        resized,
-        prepared.volume.density.clone(),
-    ))
 }
 
 /// Runs `lantern validate`.
@@ -224,7 +152,15 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
         });
     }
 
-    let table = format_table(&stem, &base, s0, args, w, h, ref_secs, &rows);
+    let table = format_table(&Table {
+        stem: &stem,
+        base: &base,
+        s0,
+        args,
+        size: (w, h),
+        ref_secs,
+        rows: &rows,
+    });
     print!("{table}");
     crate::atomic::write_bytes(&out_dir.join("table.md"), table.as_bytes())?;
     for sweep in ["s*", "N", "M"] {
@@ -267,17 +203,36 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
     Ok(())
 }
 
-#[allow(clippy::too_many_arguments)] // the table's header lists them all
-fn format_table(
-    stem: &str,
-    base: &RenderSettings,
+/// What the table of `lantern validate` shows: its header's settings and
+/// the rows.
+struct Table<'a> {
+    /// The scene's name.
+    stem: &'a str,
+    /// The base settings the sweeps vary.
+    base: &'a RenderSettings,
+    /// The base settings' resolved `s*`.
     s0: f32,
-    args: &ValidateArgs,
-    w: u32,
-    h: u32,
+    /// The command's options (sample counts).
+    args: &'a ValidateArgs,
+    /// Image width and height.
+    size: (u32, u32),
+    /// Seconds the reference took.
     ref_secs: f64,
-    rows: &[Row],
-) -> String {
+    /// One row per run.
+    rows: &'a [Row],
+}
+
+/// The table as Markdown.
+fn format_table(table: &Table<'_>) -> String {
+    let Table {
+        stem,
+        base,
+        s0,
+        args,
+        size: (w, h),
+        ref_secs,
+        rows,
+    } = *table;
     let i = &base.internal;
     let mut t = String::new();
     let _ = writeln!(
@@ -308,14 +263,4 @@ fn format_table(
         );
     }
     t
-}
-
-/// The path of a validation output for `scene` under `out`.
-pub fn output_dir(out: &Path, scene: &Path) -> PathBuf {
-    out.join(
-        scene
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "scene".into()),
-    )
 }

@@ -1,4 +1,4 @@
-//! `lantern noise`: where the internal-lights image's noise comes from
+//! `lantern noise`, a variance breakdown: where the internal-lights image's noise comes from
 //! ([method §4–§7](crate::doc::method): walk noise against the gather's own), measured.
 //!
 //! Three measurements, each relative to the mean of the whole image:
@@ -34,7 +34,8 @@ use anyhow::{bail, Context, Result};
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::cli::InternalArgs;
+use super::args::InternalArgs;
+use super::support::load_square;
 use crate::cpu::pixel_ray;
 use crate::physics::gated_walk::{accumulate_j_from, GateSettings};
 use crate::physics::gather::{gather, GatherSample};
@@ -43,7 +44,6 @@ use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::rng::Rng;
 use crate::render::{internal_params_for_set, Prepared};
 use crate::scene::{Method, RenderSettings};
-use crate::validate::load_square;
 
 /// Options of `lantern noise`.
 #[derive(Clone, Debug, clap::Args)]

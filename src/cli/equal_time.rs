@@ -33,14 +33,14 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use glam::Vec3;
 
-use crate::cli::InternalArgs;
-use crate::converge::{block_rmse_against, rmse_against, variance_path, BLOCK};
+use super::args::InternalArgs;
+use super::support::{load_square, renewal_text, variance_path};
 use crate::cpu::Renderer;
 use crate::render::export::{read_exr, read_exr_metadata, RgbImage};
 use crate::render::film::image_mean;
+use crate::render::stats::{block_rmse_against, compare, rmse_against, BLOCK};
 use crate::render::{Film, Prepared};
 use crate::scene::{Method, RenderSettings};
-use crate::validate::{compare, load_square};
 
 /// Options of `lantern equal-time`.
 #[derive(Clone, Debug, clap::Args)]
@@ -362,7 +362,7 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
         i.clock,
         i.l1,
         i.light_samples,
-        crate::converge::renewal_text(i.resample_every)
+        renewal_text(i.resample_every)
     );
     let _ = writeln!(
         md,

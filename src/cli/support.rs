@@ -1,0 +1,172 @@
+//! What the commands share, importing none of them: loading and resizing
+//! scenes, output folders and the converged images' variance files, a timed
+//! CPU render, and the GPU device and renderer of `--backend gpu`.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use glam::Vec3;
+
+use crate::cpu::Renderer;
+use crate::gpu::walks::build_internal_lights_gpu;
+use crate::gpu::{GpuContext, GpuRenderer};
+use crate::physics::internal::BuildTimings;
+use crate::render::{internal_params, Film, Prepared};
+use crate::scene::{Method, RenderSettings, Scene};
+
+/// Loads a scene and prepares it for rendering.
+pub fn load_prepared(path: &Path) -> Result<Prepared> {
+    let scene = Scene::load(path)?;
+    let dir = path.parent().unwrap_or(Path::new("."));
+    Ok(Prepared::new(scene, dir)?)
+}
+
+/// The GPU device for `--backend gpu`, with a notice of what it is.
+pub fn gpu_context() -> Result<GpuContext> {
+    let ctx = GpuContext::new_headless()?;
+    println!(
+        "GPU backend on {}{}",
+        ctx.describe(),
+        if ctx.is_software() {
+            " (software rendering on the CPU: timings are not GPU timings)"
+        } else {
+            ""
+        }
+    );
+    Ok(ctx)
+}
+
+/// The GPU renderer for `settings.method`; for the internal-lights method
+/// the lights are built on the GPU first (placement and walks, then the
+/// spatial indices on the CPU), and their build times come back too.
+pub fn gpu_renderer(
+    ctx: &GpuContext,
+    prepared: &Prepared,
+    settings: &RenderSettings,
+) -> Result<(GpuRenderer, Option<BuildTimings>)> {
+    match settings.method {
+        Method::Reference => Ok((GpuRenderer::reference(ctx, prepared, settings.seed)?, None)),
+        Method::Internal => {
+            let params = internal_params(prepared, settings);
+            let lights = build_internal_lights_gpu(ctx, prepared, &params)?;
+            println!(
+                "internal lights (built on the GPU): M = {}, s* = {:.4}, N = {}, K = {}, clock {:?}: placed in {:.3} s, walked in {:.3} s (GPU), indexed in {:.3} s (CPU)",
+                lights.len(),
+                lights.s_star,
+                lights.params.terms,
+                lights.params.walks,
+                lights.params.clock,
+                lights.timings.placement,
+                lights.timings.walks,
+                lights.timings.index,
+            );
+            let renderer = GpuRenderer::internal(
+                ctx,
+                prepared,
+                &lights,
+                settings.internal.light_samples,
+                settings.seed,
+            )?;
+            Ok((renderer, Some(lights.timings)))
+        }
+    }
+}
+
+/// Renders `spp` passes with `settings`; returns the image and the times
+/// to build and to gather.
+pub fn render_timed(
+    prepared: &Arc<Prepared>,
+    settings: &RenderSettings,
+    spp: u32,
+) -> Result<(Vec<Vec3>, f64, f64)> {
+    let never = AtomicBool::new(false);
+    let start = Instant::now();
+    let renderer =
+        Renderer::new(prepared.clone(), settings, &never).context("render was cancelled")?;
+    let build = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    let cam = prepared.camera;
+    let mut film = Film::new(cam.width, cam.height);
+    for pass in 0..spp {
+        let img = renderer
+            .pass(pass, &never)
+            .context("render was cancelled")?;
+        film.add_pass(&img.total);
+    }
+    Ok((film.mean(), build, start.elapsed().as_secs_f64()))
+}
+
+/// Loads and prepares `scene` with its image resized to `size`² pixels
+/// (0 keeps the scene's camera size).
+pub fn load_square(scene: &Path, size: u32) -> Result<Prepared> {
+    let prepared = load_prepared(scene)?;
+    let (w, h) = if size == 0 {
+        (prepared.camera.width, prepared.camera.height)
+    } else {
+        (size, size)
+    };
+    crate::render::limits::check_image_fits(w, h, "--size").map_err(anyhow::Error::msg)?;
+    if size == 0 {
+        return Ok(prepared);
+    }
+    let mut resized = prepared.scene.clone();
+    resized.camera.width = size;
+    resized.camera.height = size;
+    resized.validate(scene)?;
+    Ok(Prepared::with_density(
+        resized,
+        prepared.volume.density.clone(),
+    ))
+}
+
+/// The path of a validation output for `scene` under `out`.
+pub fn output_dir(out: &Path, scene: &Path) -> PathBuf {
+    out.join(
+        scene
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into()),
+    )
+}
+
+/// Where a converged image's per-pixel variance of the mean is read from:
+/// `NAME_var.exr` beside `NAME.exr` (`converged.exr` → `converged_var.exr`,
+/// as `converge` writes them; `tests/data/suite/NAME_var.exr`, as
+/// `tests/suite/make_references.sh` writes them).
+pub fn variance_path(converged: &Path) -> PathBuf {
+    let stem = converged
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    converged.with_file_name(format!("{stem}_var.exr"))
+}
+
+/// How often a render renews its internal lights, in words (the reports'
+/// settings line).
+pub fn renewal_text(resample_every: u32) -> String {
+    match resample_every {
+        0 => "one light set".to_owned(),
+        p => format!("a fresh light set every {p} passes"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn variance_beside_the_converged_image() {
+        let p = Path::new("tests/data/suite/chromatic.exr");
+        assert_eq!(
+            variance_path(p),
+            Path::new("tests/data/suite/chromatic_var.exr")
+        );
+        assert_eq!(
+            variance_path(Path::new("out/converged.exr")),
+            Path::new("out/converged_var.exr")
+        );
+    }
+}
