@@ -40,11 +40,3 @@ pub mod render;
 pub mod scene;
 pub mod session;
 pub mod ui;
-
-/// The path `lantern::validate::compare` that `tests/internal_lights.rs`
-/// imports, kept while that file is edited on another branch; the
-/// function is [`render::stats::compare`].
-#[doc(hidden)]
-pub mod validate {
-    pub use crate::render::stats::compare;
-}

@@ -26,8 +26,8 @@
 mod common;
 
 use glam::Vec3;
+use lantern::render::stats::compare;
 use lantern::scene::{Clock, L1Form, Method};
-use lantern::validate::compare;
 
 /// The squared error less both images' variance of the mean, relative to
 /// the reference's mean (the RMSE the converged images would have).

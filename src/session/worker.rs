@@ -473,10 +473,9 @@ impl LightsCache {
         }
         scene.render.spp = 0;
         scene.render.method = Method::Internal;
-        // Light set 0 does not depend on how often later sets replace it,
-        // only on whether they do (which leaves its reconstruction
-        // unclamped: `InternalParams::renewed`).
-        scene.render.internal.resample_every = scene.render.internal.resample_every.min(1);
+        // Light set 0 does not depend on whether or how often later sets
+        // replace it.
+        scene.render.internal.resample_every = 0;
         (scene, job.scene_dir.clone())
     }
 }
