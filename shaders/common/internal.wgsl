@@ -73,8 +73,8 @@ fn reconstruction_scale(density_at_p: f32) -> f32 {
 // lights within `h` of `p`, kernel `(1 − r²/h²)²` (`reconstruct_multi`
 // with `for_each_kernel_weight` and `LightGrid::for_each_near`). The
 // lights' series are summed and averaged unclamped, as on the CPU: a clamp
-// would bias `Ĵ` upwards where it is small next to its walk noise. `offset` picks the part (`Part` on the CPU):
-// `gather_params.multi_offset` for all of it (`L₁`), `scattered_offset`
+// would bias `Ĵ` upwards where it is small next to its walk noise.
+// `offset` picks the part (`Part` on the CPU): `gather_params.multi_offset` for all of it (`L₁`), `scattered_offset`
 // for what the walks carried through a collision (`L₀`).
 fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32) -> vec3<f32> {
     return kernel_average(p, n, density_at_p, offset, false);
@@ -126,7 +126,7 @@ fn kernel_average(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32, fr
         return vec3<f32>(0.0);
     }
     // Unclamped, so that the average over light sets is unbiased
-    // (`InternalLights::kernel_average`).
+    // (`InternalLights::reconstruct_multi`).
     return num * (scale_p / den);
 }
 

@@ -1132,7 +1132,7 @@ impl InternalLights {
         // light's noisy series at zero would bias the average upwards
         // wherever `J` is small (measured on the forward-scattering puffs
         // at K = 128: +6.8 % clamped per light, +4.5 % clamped after the
-        // sum; the average is now not clamped either). The series is linear in the
+        // sum). The series is linear in the
         // coefficients, so the kernel sums them (a contiguous
         // multiply-add the compiler vectorises) and evaluates the sum
         // once: on the puffs at 256² (M 16384, SH order 4) this function
@@ -1148,7 +1148,7 @@ impl InternalLights {
         }
         let mut y = [0.0f32; MAX_COUNT];
         sh_basis(self.sh_order, n, &mut y);
-        self.kernel_average(Self::eval_sh(bytemuck::cast_slice(sum), &y), den, scale_p)
+        Self::eval_sh(bytemuck::cast_slice(sum), &y) * (scale_p / den)
     }
 
     /// Whether the lights carry the view walks' estimates
@@ -1178,7 +1178,7 @@ impl InternalLights {
         if den <= 0.0 {
             return Vec3::ZERO;
         }
-        self.kernel_average(Vec3::from_array(sum), den, scale_p)
+        Vec3::from_array(sum) * (scale_p / den)
     }
 
     /// Adds `K_h(p − x_i) / c_i` times each kernel light's row of `table`
@@ -1198,14 +1198,6 @@ impl InternalLights {
             den += k;
         });
         den
-    }
-
-    /// The normalised kernel average `num / den` back in `Ĵ` (`scale_p`,
-    /// [`InternalLights::reconstruction_scale`]), unclamped
-    /// ([`InternalLights::reconstruct_multi`]).
-    #[inline]
-    fn kernel_average(&self, num: Vec3, den: f32, scale_p: f32) -> Vec3 {
-        num * (scale_p / den)
     }
 
     /// The factor that turns the kernel average back into `Ĵ` at a point of
