@@ -37,13 +37,44 @@ fn eval_s1(i: u32, n: vec3<f32>) -> vec3<f32> {
 // Light `i`'s SH series for the basis values `y`, unclamped (`eval_sh` of
 // the light's coefficients in the table at `offset`: `multi_offset` for the
 // multiply scattered part of `J_i`, `scattered_offset` for what of it the
-// walks carried through a collision).
+// walks carried through a collision). One band at a time without a loop:
+// this runs for every light near every point of the gather, and lavapipe
+// ends an invocation's loops after 65 535 iterations in all (sh.wgsl).
 fn eval_sh(offset: u32, i: u32, y: ptr<function, array<f32, 25>>) -> vec3<f32> {
     let count = gather_params.sh_count;
     let base = offset + i * count;
-    var sum = vec3<f32>(0.0);
-    for (var k = 0u; k < count; k++) {
-        sum += internal_vec4[base + k].xyz * (*y)[k];
+    var sum = internal_vec4[base].xyz * (*y)[0];
+    if count > 1u {
+        sum += internal_vec4[base + 1u].xyz * (*y)[1]
+            + internal_vec4[base + 2u].xyz * (*y)[2]
+            + internal_vec4[base + 3u].xyz * (*y)[3];
+    }
+    if count > 4u {
+        sum += internal_vec4[base + 4u].xyz * (*y)[4]
+            + internal_vec4[base + 5u].xyz * (*y)[5]
+            + internal_vec4[base + 6u].xyz * (*y)[6]
+            + internal_vec4[base + 7u].xyz * (*y)[7]
+            + internal_vec4[base + 8u].xyz * (*y)[8];
+    }
+    if count > 9u {
+        sum += internal_vec4[base + 9u].xyz * (*y)[9]
+            + internal_vec4[base + 10u].xyz * (*y)[10]
+            + internal_vec4[base + 11u].xyz * (*y)[11]
+            + internal_vec4[base + 12u].xyz * (*y)[12]
+            + internal_vec4[base + 13u].xyz * (*y)[13]
+            + internal_vec4[base + 14u].xyz * (*y)[14]
+            + internal_vec4[base + 15u].xyz * (*y)[15];
+    }
+    if count > 16u {
+        sum += internal_vec4[base + 16u].xyz * (*y)[16]
+            + internal_vec4[base + 17u].xyz * (*y)[17]
+            + internal_vec4[base + 18u].xyz * (*y)[18]
+            + internal_vec4[base + 19u].xyz * (*y)[19]
+            + internal_vec4[base + 20u].xyz * (*y)[20]
+            + internal_vec4[base + 21u].xyz * (*y)[21]
+            + internal_vec4[base + 22u].xyz * (*y)[22]
+            + internal_vec4[base + 23u].xyz * (*y)[23]
+            + internal_vec4[base + 24u].xyz * (*y)[24];
     }
     return sum;
 }
