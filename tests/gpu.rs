@@ -1429,3 +1429,42 @@ fn issue23_opaque_sphere_and_far_light_agree() {
     assert!(prepared.dense.is_some());
     issue23_agree("opaque sphere, far light", prepared, 64, 60.0);
 }
+
+/// The GPU's sign that the driver cut a pass short
+/// (`GpuImage::cut_short_passes`), tested where such a driver runs: on
+/// llvmpipe (lavapipe, the CI's adapter), whose loops stop once an
+/// invocation's iterations add up to 65 535, a gather far past that
+/// (32 gather points with three window scatterings each in the thick
+/// cumulus: ratio tracking through tens of mean free paths for every one)
+/// must be reported cut short, and the defaults there must not be. On a
+/// hardware adapter nothing is cut.
+#[test]
+fn passes_cut_short_by_the_driver_are_reported() {
+    let Some(ctx) = common::gpu() else { return };
+    let llvmpipe = ctx.describe().contains("llvmpipe");
+    let prepared = prepare_small("assets/scenes/suite/thick_cumulus.ron", 16);
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    settings.seed = 3;
+    (settings.internal.lights, settings.internal.walks) = (512, 4);
+    settings.internal.resample_every = 0;
+    let cache = common::build_lights(&prepared, &settings);
+    let cut_at = |light_samples: u32, window_scatters: u32| {
+        // Window scatterings are the gather's alone: the same lights.
+        let mut lights = (*cache).clone();
+        lights.params.window_scatters = window_scatters;
+        let cache = Arc::new(lights);
+        let mut renderer = GpuRenderer::internal(&ctx, &prepared, &cache, light_samples, 2)
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        common::gpu_render(&mut renderer, 2).cut_short_passes()
+    };
+    let heavy = cut_at(32, 3);
+    let defaults = cut_at(4, 2);
+    println!("passes cut short: {heavy} (32 points × 3 scatterings), {defaults} (defaults)");
+    assert_eq!(defaults, 0, "the defaults' gather was cut short");
+    if llvmpipe {
+        assert!(heavy > 0, "llvmpipe's loop cap went unreported");
+    } else {
+        assert_eq!(heavy, 0, "a hardware driver cut passes short");
+    }
+}

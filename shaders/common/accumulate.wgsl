@@ -6,7 +6,9 @@
 // Keep `Accum` in sync with `GpuAccum` in src/gpu/mirrors.rs.
 
 // One pixel's running statistics: `mean` and `m2` of the full estimate,
-// `single_mean` of its single-scattering part (w components unused).
+// `single_mean` of its single-scattering part; `mean.w` counts the passes
+// whose invocation the driver's loop cap cut short (`loops_cut_short`),
+// the other w components are unused.
 struct Accum {
     mean: vec4<f32>,
     m2: vec4<f32>,
@@ -20,9 +22,30 @@ fn finite_or_zero(v: vec3<f32>) -> vec3<f32> {
     return select(v, vec3<f32>(0.0), exponent == vec3<u32>(0x7f800000u));
 }
 
+// Whether a loop of this invocation has been ended by the driver rather
+// than by its own condition, asked once the pass's work is done. Mesa's
+// llvmpipe (lavapipe) ends every loop of an invocation once the loops'
+// iterations add up to 65 535 in all (`LP_MAX_TGSI_LOOP_ITERATIONS`, one
+// counter per invocation), which leaves the estimate silently short. A
+// loop of two iterations, its bound read at run time so that no compiler
+// unrolls it, then stops after one: that is the sign. Hardware drivers
+// have no such cap.
+fn loops_cut_short() -> bool {
+    let bound = select(2u, 3u, pass_params.sample_count == 0xffffffffu);
+    var n = 0u;
+    loop {
+        n += 1u;
+        if n >= bound {
+            break;
+        }
+    }
+    return n < bound;
+}
+
 // `a` after adding the sample (`total`, `single`) as sample number
-// `count` (1 for the first pass).
-fn accumulate(a: Accum, total: vec3<f32>, single: vec3<f32>, count: u32) -> Accum {
+// `count` (1 for the first pass); `cut` counts the pass in `mean.w` as
+// one that the driver's loop cap cut short (`loops_cut_short`).
+fn accumulate(a: Accum, total: vec3<f32>, single: vec3<f32>, count: u32, cut: bool) -> Accum {
     let x = finite_or_zero(total);
     let s = finite_or_zero(single);
     let n = f32(count);
@@ -30,5 +53,6 @@ fn accumulate(a: Accum, total: vec3<f32>, single: vec3<f32>, count: u32) -> Accu
     let mean = a.mean.xyz + delta / n;
     let m2 = a.m2.xyz + delta * (x - mean);
     let single_mean = a.single_mean.xyz + (s - a.single_mean.xyz) / n;
-    return Accum(vec4<f32>(mean, 0.0), vec4<f32>(m2, 0.0), vec4<f32>(single_mean, 0.0));
+    let cut_passes = a.mean.w + select(0.0, 1.0, cut);
+    return Accum(vec4<f32>(mean, cut_passes), vec4<f32>(m2, 0.0), vec4<f32>(single_mean, 0.0));
 }

@@ -16,5 +16,6 @@ fn gather_pass(@builtin(global_invocation_id) id: vec3<u32>) {
     var rng = px.rng;
     let s = gather(scene.camera.eye, px.dir, gather_params.light_samples, &rng);
     let total = s.single + s.reconstructed + s.internal;
-    accum[px.index] = accumulate(accum[px.index], total, s.single, pass_params.sample_count);
+    let cut = loops_cut_short();
+    accum[px.index] = accumulate(accum[px.index], total, s.single, pass_params.sample_count, cut);
 }

@@ -330,6 +330,23 @@ fn warn_long_render(first: f64, spp: u32) {
     }
 }
 
+/// Warns if the GPU driver cut pixel passes short
+/// ([`GpuImage::cut_short_passes`](crate::gpu::GpuImage::cut_short_passes)):
+/// those samples are too dark, and `--backend cpu` has no such limit.
+fn warn_cut_short(image: &crate::gpu::GpuImage) {
+    let cut = image.cut_short_passes();
+    if cut > 0 {
+        let all = u64::from(image.width) * u64::from(image.height) * u64::from(image.samples);
+        eprintln!(
+            "warning: the GPU driver cut {cut} of {all} pixel passes short ({:.3} %): it caps the \
+             loop iterations of one shader invocation (Mesa's software driver does), so the \
+             image is darker than it should be; render with --backend cpu, or with fewer \
+             light samples or window scatterings",
+            100.0 * cut as f64 / all.max(1) as f64
+        );
+    }
+}
+
 /// Fails if any flight was refused for a non-finite ray (see
 /// [`crate::physics::tracking::non_finite_flights`]): the image would be
 /// wrong, so it is not written over a good one.
@@ -457,6 +474,7 @@ fn render_gpu(
     }
     let secs = start.elapsed().as_secs_f64();
     let image = renderer.read_back()?;
+    warn_cut_short(&image);
     let film = image.film();
     let s_star =
         (settings.method == Method::Internal).then(|| internal_params(prepared, settings).s_star);

@@ -345,7 +345,9 @@ const _: () = assert!(std::mem::size_of::<GpuWalkParams>() == 64);
 
 /// One pixel's running statistics on the GPU: Welford mean and sum of
 /// squared deviations of the estimate, and the mean of its single-scattering
-/// part (`w` unused). Keep in sync with `Accum` in
+/// part; `mean[3]` counts the passes that the driver's loop cap cut short
+/// (see [`GpuImage::cut_short_passes`](super::GpuImage::cut_short_passes)),
+/// the other `w` are unused. Keep in sync with `Accum` in
 /// `shaders/common/accumulate.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -527,6 +529,11 @@ impl GpuAccum {
     /// The running mean of the single-scattering part.
     pub fn single_mean(&self) -> Vec3 {
         Vec3::from_slice(&self.single_mean[..3])
+    }
+
+    /// Passes of this pixel that the driver's loop cap cut short.
+    pub fn cut_short_passes(&self) -> u32 {
+        self.mean[3] as u32
     }
 }
 

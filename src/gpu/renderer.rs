@@ -306,6 +306,18 @@ impl GpuImage {
     pub fn single_mean(&self) -> Vec<Vec3> {
         self.pixels.iter().map(GpuAccum::single_mean).collect()
     }
+
+    /// Pixel passes whose estimate the driver cut short, summed over the
+    /// image: Mesa's software driver (lavapipe) ends all of an
+    /// invocation's loops after 65 535 iterations in all, which leaves
+    /// those samples too dark without any error. Zero on hardware drivers
+    /// and whenever the work per pixel stays under the cap.
+    pub fn cut_short_passes(&self) -> u64 {
+        self.pixels
+            .iter()
+            .map(|p| u64::from(p.cut_short_passes()))
+            .sum()
+    }
 }
 
 /// A progressive GPU renderer for one prepared scene and one estimator.
