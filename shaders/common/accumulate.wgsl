@@ -28,10 +28,11 @@ fn finite_or_zero(v: vec3<f32>) -> vec3<f32> {
 // iterations add up to 65 535 in all (`LP_MAX_TGSI_LOOP_ITERATIONS`, one
 // counter per invocation), which leaves the estimate silently short. A
 // loop of two iterations, its bound read at run time so that no compiler
-// unrolls it, then stops after one: that is the sign. Hardware drivers
-// have no such cap.
-fn loops_cut_short() -> bool {
-    let bound = select(2u, 3u, pass_params.sample_count == 0xffffffffu);
+// unrolls it, then stops after one: that is the sign. `runtime` is any
+// value read from a buffer (the pass's sample count): it only keeps the
+// bound unknown to the compiler. Hardware drivers have no such cap.
+fn loops_cut_short(runtime: u32) -> bool {
+    let bound = select(2u, 3u, runtime == 0xffffffffu);
     var n = 0u;
     loop {
         n += 1u;

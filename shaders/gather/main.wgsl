@@ -16,6 +16,6 @@ fn gather_pass(@builtin(global_invocation_id) id: vec3<u32>) {
     var rng = px.rng;
     let s = gather(scene.camera.eye, px.dir, gather_params.light_samples, &rng);
     let total = s.single + s.reconstructed + s.internal;
-    let cut = loops_cut_short();
+    let cut = loops_cut_short(pass_params.sample_count);
     accum[px.index] = accumulate(accum[px.index], total, s.single, pass_params.sample_count, cut);
 }

@@ -14,6 +14,6 @@ fn reference_pass(@builtin(global_invocation_id) id: vec3<u32>) {
     let px = pixel_sample(id);
     var rng = px.rng;
     let s = radiance_split(scene.camera.eye, px.dir, 0xffffffffu, &rng);
-    let cut = loops_cut_short();
+    let cut = loops_cut_short(pass_params.sample_count);
     accum[px.index] = accumulate(accum[px.index], s.radiance, s.single, pass_params.sample_count, cut);
 }
