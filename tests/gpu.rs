@@ -39,7 +39,7 @@ use lantern::gpu::mirrors::{
 };
 use lantern::gpu::shaders::{ModuleSource, MODULES};
 use lantern::gpu::GpuRenderer;
-use lantern::physics::internal::InternalLights;
+use lantern::physics::internal::sources::InternalLights;
 use lantern::render::{internal_params, Film, Prepared};
 use lantern::scene::{Clock, InternalSettings, L1Form, Method, RenderSettings};
 
@@ -590,7 +590,12 @@ fn gather_agrees_puffs_few_walks_unclamped() {
         let p = light.position;
         let n = (eye - p).normalize();
         let rho = prepared.volume.density.density(p);
-        let v = cache.reconstruct_multi(p, n, rho, lantern::physics::internal::Part::Scattered);
+        let v = cache.reconstruct_multi(
+            p,
+            n,
+            rho,
+            lantern::physics::internal::sources::Part::Scattered,
+        );
         for c in v.to_array() {
             total += c.abs() as f64;
             negative += (-c).max(0.0) as f64;
@@ -639,9 +644,11 @@ fn gather_agrees_thin_sphere_point_lights() {
 //   within the spread of image means between light sets.
 
 use lantern::gpu::walks::{build_internal_lights_gpu, place_lights_gpu};
-use lantern::physics::gated_walk::{accumulate_j_from, collided_per_unit_chance, GateSettings};
-use lantern::physics::internal::{InternalParams, PLACEMENT_RESOLUTION};
-use lantern::physics::placement::PlacementDensity;
+use lantern::physics::internal::chances::collided_per_unit_chance;
+use lantern::physics::internal::clock::GateSettings;
+use lantern::physics::internal::placement::PlacementDensity;
+use lantern::physics::internal::sources::{InternalParams, PLACEMENT_RESOLUTION};
+use lantern::physics::internal::walk::accumulate_j_from;
 use lantern::physics::reference::RR_START_DEPTH;
 use lantern::physics::rng::Rng;
 use lantern::physics::sh::sh_basis;
@@ -946,7 +953,7 @@ impl ZStats {
 /// fail the same statistics.
 fn walks_case(
     scene: &str,
-    clock: lantern::physics::gated_walk::Clock,
+    clock: lantern::physics::internal::clock::Clock,
     m: usize,
     k: u32,
     terms: u32,
@@ -1073,7 +1080,7 @@ fn walks_case(
 
 #[test]
 fn gpu_walks_agree_thin_sphere() {
-    use lantern::physics::gated_walk::Clock;
+    use lantern::physics::internal::clock::Clock;
     walks_case(
         "assets/scenes/thin_sphere.ron",
         Clock::OpticalDepth,
@@ -1092,7 +1099,7 @@ fn gpu_walks_agree_thin_sphere() {
 
 #[test]
 fn gpu_walks_agree_chromatic_sphere() {
-    use lantern::physics::gated_walk::Clock;
+    use lantern::physics::internal::clock::Clock;
     walks_case(
         "assets/scenes/chromatic_sphere.ron",
         Clock::OpticalDepth,
@@ -1104,7 +1111,7 @@ fn gpu_walks_agree_chromatic_sphere() {
 
 #[test]
 fn gpu_walks_agree_puffs_grid() {
-    use lantern::physics::gated_walk::Clock;
+    use lantern::physics::internal::clock::Clock;
     walks_case(
         "assets/scenes/puffs_grid.ron",
         Clock::OpticalDepth,

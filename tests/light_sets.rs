@@ -100,14 +100,14 @@ fn placement_density_is_kept_with_the_scene() {
     for set in 0..3 {
         let params = lantern::render::internal_params_for_set(&prepared, &settings, set);
         let cached = prepared.build_internal_lights(&params, &never).unwrap();
-        let fresh = lantern::physics::internal::InternalLights::build(
+        let fresh = lantern::physics::internal::sources::InternalLights::build(
             &prepared.volume,
             &prepared.lights,
             &params,
             &never,
         )
         .unwrap();
-        let positions = |l: &lantern::physics::internal::InternalLights| {
+        let positions = |l: &lantern::physics::internal::sources::InternalLights| {
             l.lights.iter().map(|l| l.position).collect::<Vec<_>>()
         };
         assert_eq!(positions(&cached), positions(&fresh));

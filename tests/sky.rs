@@ -373,7 +373,7 @@ fn bad_skies_are_refused_clearly() {
 }
 
 /// The internal lights' own `S₁` holds the sky's share
-/// (`physics::internal::sky_arrival`): over the 64 lights of the furnace
+/// (`physics::internal::sources::sky_arrival`): over the 64 lights of the furnace
 /// sphere (optical radius 2, `g` 0.5, so the sky's light at a light falls
 /// off towards the sphere's far side), each towards its own direction,
 /// `eval_s1` sums to what many one-sample estimates of the sky's

@@ -1,6 +1,6 @@
 // The path-length clock and the time-gated backward walk that estimates
 // `J_N = Σ_{k=0}^{N} G(k s*) S₁` at a point (src/doc/method.md §3, §4, §7). Mirrors
-// src/physics/gated_walk.rs: `march_clock`, the private `walk` and
+// src/physics/internal/walk.rs: `march_clock`, the private `walk` and
 // `accumulate_j_from`. WGSL has no closures, so the CPU's `on_gate`
 // callback of `accumulate_j_from` is written out as `gate_add`.
 

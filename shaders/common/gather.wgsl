@@ -1,5 +1,5 @@
 // The final gather of the internal-lights method (src/doc/method.md §6). Mirrors
-// `gather` and `field_l1_at` in src/physics/gather.rs, part for part. The
+// `gather` and `field_l1_at` in src/physics/internal/gather.rs, part for part. The
 // window `[0, w]` of the camera ray is cut into `samples` strata with one
 // jittered point `y` each (transmittance `T(x, y)` by ratio tracking),
 // placed by `points_along` (uniform, or following the extinction for the
@@ -28,7 +28,7 @@
 //     per-thread storage.
 
 // Where the gather's points go along a stretch of a ray (`SegmentPdf` in
-// src/physics/segment_pdf.rs): `SEGMENT_PIECES` equal pieces, uniform
+// src/physics/internal/segment_pdf.rs): `SEGMENT_PIECES` equal pieces, uniform
 // (geometric clock) or each in proportion to the chance that light is
 // stopped in it, `e^{−τ_l} (1 − e^{−c_l Δ})` with `c_l` the larger grey
 // extinction at its ends and `τ_l` by the trapezoid rule, mixed with the

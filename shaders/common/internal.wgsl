@@ -1,5 +1,5 @@
 // Evaluating the cached internal lights (src/doc/method.md §5, §6). Mirrors the
-// read side of `InternalLights` in src/physics/internal.rs: `S₁` from the
+// read side of `InternalLights` in src/physics/internal/sources.rs: `S₁` from the
 // stored arriving light, the multiply scattered part from its SH
 // coefficients (clamped at zero for one light), and the kernel
 // reconstruction of `Ĵ` at a point, the normalised average of the lights'

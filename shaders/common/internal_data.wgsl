@@ -1,7 +1,7 @@
 // The cached internal lights as the gather reads them (bindings 6–8).
 // Keep in sync with `GpuGatherParams` in src/gpu/mirrors.rs and with
-// src/gpu/gather.rs, which packs `InternalLights` (src/physics/internal.rs)
-// and its two `LightGrid`s (src/physics/light_index.rs) into two buffers:
+// src/gpu/gather.rs, which packs `InternalLights` (src/physics/internal/sources.rs)
+// and its two `LightGrid`s (src/physics/internal/light_index.rs) into two buffers:
 //
 // - `internal_vec4`: per light two vec4 (position, ρ(x_i); V_i, the
 //   reconstruction scale), then `sh_count` SH coefficients of the multiply

@@ -1,5 +1,5 @@
 // Spatial indices over the internal lights (src/doc/method.md §6). Mirrors the
-// lookups of `LightGrid` in src/physics/light_index.rs: bucket grids whose
+// lookups of `LightGrid` in src/physics/internal/light_index.rs: bucket grids whose
 // cell `c` lists `ids[starts[c]..starts[c+1]]`, cells x fastest.
 
 // The (clamped) cell coordinates of `p` in a grid (`cell_coords`).

@@ -1,7 +1,7 @@
 // Placement of the internal lights (src/doc/method.md §5): a point with density
 // `p(x) = (1 − u) ρ̃(x)/Z + u/|B|` and that pdf. Mirrors
 // `PlacementDensity::sample` and `PlacementDensity::pdf` of
-// src/physics/placement.rs: `ρ̃` is the trilinear interpolant of `ρ` at the
+// src/physics/internal/placement.rs: `ρ̃` is the trilinear interpolant of `ρ` at the
 // corners of the placement grid (built on the CPU and uploaded), a cell is
 // chosen by its mass, a corner of it by its value and each coordinate from
 // the ramp towards that corner, so the point has density exactly `ρ̃/Z`.

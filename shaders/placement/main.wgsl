@@ -1,6 +1,6 @@
 // The placement's entry point: one invocation per internal light, light `i`
 // from stream `(seed, i, PLACEMENT_PASS)` (`sample_lights` in
-// src/physics/placement.rs), writing two vec4 per light to `placed`:
+// src/physics/internal/placement.rs), writing two vec4 per light to `placed`:
 // (x_i, ρ(x_i)) and (V_i = 1/(M p(x_i)), p(x_i), 0, 0). The seed comes in
 // `pass_params`. Keep `PlacementParams` in sync with `GpuPlacementParams`
 // in src/gpu/mirrors.rs.

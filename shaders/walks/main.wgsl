@@ -1,6 +1,6 @@
 // The internal lights' walks (src/doc/method.md §4, §5): one workgroup per light,
 // one time-gated walk per invocation and dispatch. Mirrors the walk loop of
-// `InternalLights::build_at` in src/physics/internal.rs: `K` directions on a
+// `InternalLights::build_at` in src/physics/internal/sources.rs: `K` directions on a
 // spherical Fibonacci lattice under a random rotation, one
 // `accumulate_j_from(…, first = 1, …)` per direction, projected onto real
 // SH (`F`: the k = 1 term; `multi`: Σ_{k≥1}), the per-term energies
@@ -22,7 +22,7 @@
 // view walks one more: their mean collided part per unit chance towards
 // the eye (walks `K .. K + view_walks` of the light, all along
 // `normalize(eye − x)`; "Walks towards the eye" in
-// src/physics/internal.rs). Keep
+// src/physics/internal/sources.rs). Keep
 // `WalkParams` in sync with `GpuWalkParams` in src/gpu/mirrors.rs.
 
 // From Rust (the generated prelude, src/gpu/shaders.rs): the stream index

@@ -13,7 +13,7 @@ use glam::Vec3;
 use crate::cpu::Renderer;
 use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuRenderer};
-use crate::physics::internal::BuildTimings;
+use crate::physics::internal::sources::BuildTimings;
 use crate::render::{internal_params, Film, Prepared};
 use crate::scene::{Method, RenderSettings, Scene};
 

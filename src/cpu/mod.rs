@@ -14,8 +14,8 @@ use std::sync::{Arc, Mutex, PoisonError};
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::physics::gather::gather;
-use crate::physics::internal::InternalLights;
+use crate::physics::internal::gather::gather;
+use crate::physics::internal::sources::InternalLights;
 use crate::physics::reference::radiance_split;
 use crate::physics::rng::Rng;
 use crate::render::{internal_params, internal_params_for_set, light_set, Film, Prepared};

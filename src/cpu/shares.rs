@@ -12,14 +12,16 @@
 //! transmittance from a coarser quadrature ([`SHADOW_STEPS`] points).
 //! Luminance-like sums of the RGB parts are normalised to shares.
 //! `L₁`'s part is attributed by the note's point-light form for both
-//! [`crate::physics::internal::L1Form`]s: the field form spreads each
+//! [`crate::physics::internal::sources::L1Form`]s: the field form spreads each
 //! light's `J` over its kernel, which changes the shares of neighbouring
 //! lights little and would cost a volume integral per pixel to follow.
 
 use glam::Vec3;
 
-use crate::physics::gated_walk::{collision_probability, march_clock, Clock, ClockMarch};
-use crate::physics::internal::InternalLights;
+use crate::physics::internal::chances::collision_probability;
+
+use crate::physics::internal::clock::{march_clock, Clock, ClockMarch};
+use crate::physics::internal::sources::InternalLights;
 use crate::physics::phase;
 use crate::physics::sh::{sh_basis, MAX_COUNT};
 use crate::physics::volume::{DensityField, Volume};

@@ -6,7 +6,7 @@
 //! positions and weights, the SH coefficients of
 //! the multiply scattered part of `J`, the light arriving at each light
 //! from the external ones, and both spatial indices of
-//! `physics::light_index` (the fine grid of the kernel reconstruction and
+//! `physics::internal::light_index` (the fine grid of the kernel reconstruction and
 //! the cluster grid of the light selection, which only the points form
 //! reads).
 //!
@@ -19,7 +19,7 @@ use super::context::{GpuContext, GpuError};
 use super::mirrors::GpuGatherParams;
 use super::renderer::{storage_buffer, GpuRenderer};
 use super::shaders::GATHER_MODULE;
-use crate::physics::internal::InternalLights;
+use crate::physics::internal::sources::InternalLights;
 use crate::render::Prepared;
 
 /// The cached lights packed for the GPU.

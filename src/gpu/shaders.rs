@@ -65,23 +65,23 @@ pub const SH: ShaderPart = part!("common/sh.wgsl");
 /// The cached internal lights' bindings 6–8 (`gpu/gather.rs`).
 pub const INTERNAL_DATA: ShaderPart = part!("common/internal_data.wgsl");
 /// The path-length clock and the time-gated walk
-/// (`physics/gated_walk.rs`).
+/// (`physics/internal/walk.rs`).
 pub const GATED_WALK: ShaderPart = part!("common/gated_walk.wgsl");
-/// Light grids (`physics/light_index.rs`).
+/// Light grids (`physics/internal/light_index.rs`).
 pub const LIGHT_INDEX: ShaderPart = part!("common/light_index.wgsl");
-/// Evaluating the internal lights (`physics/internal.rs`).
+/// Evaluating the internal lights (`physics/internal/sources.rs`).
 pub const INTERNAL: ShaderPart = part!("common/internal.wgsl");
-/// The final gather (`physics/gather.rs`).
+/// The final gather (`physics/internal/gather.rs`).
 pub const GATHER: ShaderPart = part!("common/gather.wgsl");
 /// The internal-lights renderer's entry point (`cpu/mod.rs`, internal
 /// method).
 pub const GATHER_MAIN: ShaderPart = part!("gather/main.wgsl");
 
-/// Placement of the internal lights (`physics/placement.rs`).
+/// Placement of the internal lights (`physics/internal/placement.rs`).
 pub const PLACEMENT: ShaderPart = part!("common/placement.wgsl");
-/// The placement's entry point (`physics/placement.rs`, `sample_lights`).
+/// The placement's entry point (`physics/internal/placement.rs`, `sample_lights`).
 pub const PLACEMENT_MAIN: ShaderPart = part!("placement/main.wgsl");
-/// The walks' entry point (`physics/internal.rs`, the walk loop of
+/// The walks' entry point (`physics/internal/sources.rs`, the walk loop of
 /// `InternalLights::build_at`).
 pub const WALKS_MAIN: ShaderPart = part!("walks/main.wgsl");
 /// Display transforms (`render/tonemap.rs`).
@@ -167,9 +167,13 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!(
         "PLACEMENT_PASS",
         U32,
-        crate::physics::placement::PLACEMENT_PASS
+        crate::physics::internal::placement::PLACEMENT_PASS
     ),
-    shared!("WALK_PASS", U32, crate::physics::internal::WALK_PASS),
+    shared!(
+        "WALK_PASS",
+        U32,
+        crate::physics::internal::sources::WALK_PASS
+    ),
     // The estimators' constants.
     shared!("PI", F32, std::f32::consts::PI),
     shared!(
@@ -189,45 +193,53 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!(
         "CLOCK_SPLIT_WINDOW",
         F32,
-        crate::physics::gated_walk::CLOCK_SPLIT_WINDOW
+        crate::physics::internal::clock::CLOCK_SPLIT_WINDOW
     ),
     shared!(
         "CLOCK_MAX_STEPS",
         F32,
-        crate::physics::gated_walk::CLOCK_MAX_STEPS
+        crate::physics::internal::clock::CLOCK_MAX_STEPS
     ),
     shared!(
         "COLLISION_FLOOR",
         F32,
-        crate::physics::gated_walk::COLLISION_FLOOR
+        crate::physics::internal::chances::COLLISION_FLOOR
     ),
     shared!(
         "COLLISION_DEPTH",
         F32,
-        crate::physics::gated_walk::COLLISION_DEPTH
+        crate::physics::internal::chances::COLLISION_DEPTH
     ),
     shared!(
         "GUIDED_COLLISIONS",
         U32,
-        crate::physics::gated_walk::GUIDED_COLLISIONS
+        crate::physics::internal::guiding::GUIDED_COLLISIONS
     ),
     shared!(
         "GUIDE_PROBABILITY",
         F32,
-        crate::physics::gated_walk::GUIDE_PROBABILITY
+        crate::physics::internal::guiding::GUIDE_PROBABILITY
     ),
-    shared!("GUIDE_G", F32, crate::physics::gated_walk::GUIDE_G),
-    shared!("GOLDEN_ANGLE", F32, crate::physics::internal::GOLDEN_ANGLE),
-    shared!("TRACKING_RATE", F32, crate::physics::gather::TRACKING_RATE),
+    shared!("GUIDE_G", F32, crate::physics::internal::guiding::GUIDE_G),
+    shared!(
+        "GOLDEN_ANGLE",
+        F32,
+        crate::physics::internal::sources::GOLDEN_ANGLE
+    ),
+    shared!(
+        "TRACKING_RATE",
+        F32,
+        crate::physics::internal::gather::TRACKING_RATE
+    ),
     shared!(
         "SEGMENT_PIECES",
         U32,
-        crate::physics::segment_pdf::PIECES as u32
+        crate::physics::internal::segment_pdf::PIECES as u32
     ),
     shared!(
         "SEGMENT_DEFENSIVE",
         F32,
-        crate::physics::segment_pdf::DEFENSIVE
+        crate::physics::internal::segment_pdf::DEFENSIVE
     ),
 ];
 

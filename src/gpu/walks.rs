@@ -3,8 +3,8 @@
 //! `V_i = 1/(M p(x_i))`, then `K` time-gated walks per light estimating
 //! `J_N(x_i, ·)` with both clocks, projected onto real SH, with the per-term
 //! energies `E_k` and the light arriving from each external light. The same
-//! estimators as [`InternalLights::build`] (`physics::placement`,
-//! `physics::gated_walk`, `physics::internal`), with other random streams.
+//! estimators as [`InternalLights::build`] (`physics::internal::placement`,
+//! `physics::internal::walk`, `physics::internal::sources`), with other random streams.
 //!
 //! - Placement: the placement grid (`ρ` at the cell corners) and an alias
 //!   table over its cells depend on the medium only and are built on the
@@ -39,7 +39,7 @@ use super::context::{GpuContext, GpuError};
 use super::mirrors::{GpuPassParams, GpuPlacementParams, GpuWalkParams};
 use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
-use crate::physics::internal::{
+use crate::physics::internal::sources::{
     kernel_radius_for, place_internal_lights, within_view_reach, InternalLight, InternalLights,
     InternalParams, LightSources,
 };
@@ -90,7 +90,7 @@ struct Build {
 /// Places `params.lights` lights on the GPU for `prepared`'s medium with
 /// `params.uniform_mix` and `params.seed`, and reads them back (the first
 /// half of [`build_internal_lights_gpu`]; the tests check it against
-/// [`PlacementDensity`](crate::physics::placement::PlacementDensity)).
+/// [`PlacementDensity`](crate::physics::internal::placement::PlacementDensity)).
 pub fn place_lights_gpu(
     ctx: &GpuContext,
     prepared: &Prepared,

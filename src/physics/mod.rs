@@ -9,18 +9,12 @@
 
 pub mod environment;
 pub mod frame;
-pub mod gated_walk;
-pub mod gather;
 pub mod internal;
-pub mod light_index;
 pub mod lights;
 pub mod majorant;
 pub mod phase;
-pub mod placement;
 pub mod reference;
 pub mod rng;
-pub mod segment_pdf;
 pub mod sh;
 pub mod tracking;
-pub mod view_placement;
 pub mod volume;

@@ -21,8 +21,9 @@
 
 use glam::Vec3;
 
-/// The highest supported order `l`.
-pub const MAX_ORDER: u32 = 4;
+/// The highest supported order `l` (the settings' bound on `sh_order`,
+/// defined with them so that the scene layer needs nothing of this one).
+pub use crate::scene::settings::MAX_SH_ORDER as MAX_ORDER;
 
 /// Number of coefficients of the highest supported order, `(MAX_ORDER+1)²`.
 pub const MAX_COUNT: usize = ((MAX_ORDER + 1) * (MAX_ORDER + 1)) as usize;

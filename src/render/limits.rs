@@ -11,7 +11,7 @@
 //!
 //! Every message names the flag or field and gives the estimate.
 
-use crate::physics::gated_walk::Clock;
+use crate::physics::internal::clock::Clock;
 use crate::render::prepared::{default_s_star, feature_length, internal_params};
 use crate::render::Prepared;
 use crate::scene::{Method, RenderSettings};

@@ -9,10 +9,10 @@ use std::sync::{Arc, Mutex, PoisonError};
 use glam::Vec3;
 
 use crate::physics::environment::{EnvMap, Environment, EnvironmentKind};
-use crate::physics::internal::{placement_density, InternalLights, InternalParams};
+use crate::physics::internal::placement::PlacementDensity;
+use crate::physics::internal::sources::{placement_density, InternalLights, InternalParams};
+use crate::physics::internal::view_placement::ViewFrame;
 use crate::physics::lights::{Lights, PointLight, Sun};
-use crate::physics::placement::PlacementDensity;
-use crate::physics::view_placement::ViewFrame;
 use crate::physics::volume::{DensityField, Optics, Volume};
 use crate::scene::settings::DEFAULT_S_STAR;
 use crate::scene::{

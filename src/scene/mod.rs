@@ -486,13 +486,13 @@ impl InternalSettings {
                 format!("K = {} must lie in 1..={MAX_WALKS}", self.walks),
             );
         }
-        if self.sh_order > crate::physics::sh::MAX_ORDER {
+        if self.sh_order > settings::MAX_SH_ORDER {
             return bad(
                 "sh_order",
                 format!(
                     "{} exceeds the highest supported order {}",
                     self.sh_order,
-                    crate::physics::sh::MAX_ORDER
+                    settings::MAX_SH_ORDER
                 ),
             );
         }
@@ -507,7 +507,7 @@ impl InternalSettings {
                 format!("{} must lie in [0, 1]", self.uniform_mix),
             );
         }
-        let most = crate::physics::gather::MAX_GATHER_POINTS as u32;
+        let most = settings::MAX_GATHER_POINTS as u32;
         if self.light_samples == 0 || self.light_samples > most {
             return bad(
                 "light_samples",
@@ -520,7 +520,7 @@ impl InternalSettings {
                 format!("{} must lie in 0..={MAX_WALKS}", self.view_walks),
             );
         }
-        let most = crate::physics::internal::MAX_WINDOW_SCATTERS;
+        let most = settings::MAX_WINDOW_SCATTERS;
         if self.window_scatters == 0 || self.window_scatters > most {
             return bad(
                 "window_scatters",

@@ -24,7 +24,7 @@ pub enum Method {
 /// What the path-length clock of the internal-lights method counts
 /// between the walks' gates ([method §3, §7](crate::doc::method)): the one
 /// enum that the scene file (`clock: OpticalDepth`), the command line
-/// (`--clock optical-depth`), the estimators (`physics::gated_walk`
+/// (`--clock optical-depth`), the estimators (`physics::internal::clock`
 /// re-exports it) and the GPU ([`Clock::tag`]) use.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 pub enum Clock {
@@ -99,7 +99,7 @@ pub struct InternalSettings {
     /// Order of the real spherical harmonics that store `F` and `J`.
     pub sh_order: u32,
     /// Kernel radius `h` (world units); `None`: 2.5 × the mean light
-    /// spacing (`physics::internal::AUTO_KERNEL_FACTOR`; with lights in
+    /// spacing (`physics::internal::sources::AUTO_KERNEL_FACTOR`; with lights in
     /// the camera's view, the median distance to a light's 64th
     /// neighbour).
     pub kernel_radius: Option<f32>,
@@ -286,6 +286,15 @@ pub const MAX_INTERNAL_LIGHTS: u32 = 1 << 20;
 pub const MAX_TERMS: u32 = 4096;
 /// Largest accepted number of walks per light `K`.
 pub const MAX_WALKS: u32 = 1 << 16;
+/// The highest order of the internal lights' spherical harmonics
+/// (`sh_order`).
+pub const MAX_SH_ORDER: u32 = 4;
+/// The most stratified points per camera ray of the final gather
+/// (`light_samples`; the estimators size their arrays by it).
+pub const MAX_GATHER_POINTS: usize = 256;
+/// The most scatterings inside the final window the gather follows
+/// (`window_scatters`).
+pub const MAX_WINDOW_SCATTERS: u32 = 3;
 
 /// Settings of a render, saved with the scene.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

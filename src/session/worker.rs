@@ -40,8 +40,8 @@ use super::{renew_gpu_lights, Backend, LightBuilder, Renewal};
 use crate::cpu::Renderer;
 use crate::gpu::display::{read_accum, DisplayPass, ImageStats};
 use crate::gpu::{GpuContext, GpuError, GpuRenderer};
-use crate::physics::gated_walk::Clock;
-use crate::physics::internal::InternalLights;
+use crate::physics::internal::clock::Clock;
+use crate::physics::internal::sources::InternalLights;
 use crate::render::{Film, Prepared};
 use crate::scene::{Density, DensitySource, Method, Scene};
 

@@ -327,7 +327,7 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              in Tessendorf's note; sparkles near lights and darkens dense media at \
              small s*.",
         );
-    let most = crate::physics::internal::MAX_WINDOW_SCATTERS;
+    let most = crate::physics::internal::sources::MAX_WINDOW_SCATTERS;
     ui.add(Slider::new(&mut s.window_scatters, 1..=most).text("window scatterings"))
         .on_hover_text(
             "Scatterings inside the final window s* that the field L₁ follows. 1: \

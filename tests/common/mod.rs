@@ -47,10 +47,10 @@ pub fn render(prepared: &Arc<Prepared>, method: Method, seed: u64, spp: u32) -> 
 pub fn build_lights(
     prepared: &Prepared,
     settings: &lantern::scene::RenderSettings,
-) -> Arc<lantern::physics::internal::InternalLights> {
+) -> Arc<lantern::physics::internal::sources::InternalLights> {
     let never = std::sync::atomic::AtomicBool::new(false);
     Arc::new(
-        lantern::physics::internal::InternalLights::build(
+        lantern::physics::internal::sources::InternalLights::build(
             &prepared.volume,
             &prepared.lights,
             &lantern::render::internal_params(prepared, settings),
@@ -65,7 +65,7 @@ pub fn build_lights(
 pub fn gather_cpu(
     prepared: &Arc<Prepared>,
     settings: &lantern::scene::RenderSettings,
-    lights: &Arc<lantern::physics::internal::InternalLights>,
+    lights: &Arc<lantern::physics::internal::sources::InternalLights>,
     spp: u32,
 ) -> Film {
     let never = std::sync::atomic::AtomicBool::new(false);

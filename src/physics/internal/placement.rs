@@ -38,8 +38,8 @@
 use glam::{UVec3, Vec3};
 use rayon::prelude::*;
 
-use super::rng::Rng;
-use super::volume::DensityField;
+use crate::physics::rng::Rng;
+use crate::physics::volume::DensityField;
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) used for placement, so
 /// that it does not share numbers with renders using the same seed (the

@@ -22,7 +22,7 @@
 
 use glam::Vec3;
 
-use super::volume::{DensityField, Volume};
+use crate::physics::volume::{DensityField, Volume};
 
 /// Pieces a stretch is cut into. Sixteen rather than eight since the
 /// gather takes 32 points per ray: on the puffs at 256² (`lantern noise`,

@@ -62,7 +62,7 @@
 //! variance × time from 190 to 76 %² s (128², M 16384, K 16).
 //!
 //! With the optical-depth clock the walks return `Ĵ_k = c_g(x_i) J^τ_k`
-//! (see [`super::gated_walk`]), and everything below uses `Ĵ` in place of
+//! (see [`super::walk`]), and everything below uses `Ĵ` in place of
 //! `J`; `k = 0` is `S₁` for both clocks.
 //!
 //! # The energy of each term
@@ -78,20 +78,21 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::gated_walk::{
-    accumulate_collided, accumulate_j_from, collided_per_unit_chance, collision_probability,
-    march_clock, Clock, ClockMarch, GateSettings,
-};
+use super::chances::{collided_per_unit_chance, collision_probability};
+
+use super::clock::{march_clock, Clock, ClockMarch, GateSettings};
+
 use super::light_index::LightGrid;
-use super::lights::Lights;
-use super::phase;
 use super::placement::{place_lights_with, PlacementDensity};
-use super::reference::RR_START_DEPTH;
-use super::rng::Rng;
-use super::sh::{sh_basis, sh_count, MAX_COUNT, MAX_ORDER};
-use super::tracking::{transmittance, transmittance_at_rate};
 use super::view_placement::{knn_kernel_radius, place_in_view, ViewFrame};
-use super::volume::{DensityField, Volume};
+use super::walk::{accumulate_collided, accumulate_j_from};
+use crate::physics::lights::Lights;
+use crate::physics::phase;
+use crate::physics::reference::RR_START_DEPTH;
+use crate::physics::rng::Rng;
+use crate::physics::sh::{sh_basis, sh_count, MAX_COUNT, MAX_ORDER};
+use crate::physics::tracking::{transmittance, transmittance_at_rate};
+use crate::physics::volume::{DensityField, Volume};
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) of the walks, apart
 /// from the placement's and the renders' (the WGSL's `WALK_PASS` is
@@ -188,8 +189,9 @@ pub const AUTO_KERNEL_FACTOR: f32 = 2.5;
 pub const KERNEL_NEIGHBOURS: usize = 64;
 
 /// The most scatterings inside the final window the gather follows
-/// ([`InternalParams::window_scatters`]).
-pub const MAX_WINDOW_SCATTERS: u32 = 3;
+/// ([`InternalParams::window_scatters`]): the settings' bound, defined with
+/// them so that the scene layer needs nothing of this one.
+pub use crate::scene::settings::MAX_WINDOW_SCATTERS;
 
 /// `h₁ / h`: `L₁`'s kernel `1/(r² + h₁²)` is softened far less than the
 /// reconstruction averages. Its bias ([method §6](crate::doc::method): it vanishes as
@@ -208,10 +210,10 @@ pub enum Part {
     /// `k ≥ 1` part, whose unscattered rest (single scatter from `k s*`
     /// further along the ray) the gather marches exactly. Stored and
     /// reconstructed **per unit chance of that collision**,
-    /// [`super::gated_walk::collision_probability`] along `−n`: the walks
+    /// [`super::chances::collision_probability`] along `−n`: the walks
     /// divide by it at the light, and the gather multiplies the
     /// reconstruction by it at the point
-    /// ([`super::gated_walk::ChancesAlongRay`]). Near the surface of a
+    /// ([`super::chances::ChancesAlongRay`]). Near the surface of a
     /// puff that chance drops from nearly one to nothing across the
     /// directions that leave the medium;
     /// projected as it was, order-4 harmonics and a kernel that reaches
@@ -296,13 +298,13 @@ pub struct InternalLights {
     /// `multi_coeffs` and `scattered_coeffs`. Copies in the order the
     /// kernel reconstruction visits the lights, so that it reads them
     /// from contiguous memory rather than all over the light arrays.
-    fine_points: Vec<[f32; 4]>,
+    pub(super) fine_points: Vec<[f32; 4]>,
     /// [`LightSources::view`]: per light (empty without view walks).
     pub(crate) view: Vec<Vec3>,
     /// `view` aligned with `fine.ids()`.
-    fine_view: Vec<Vec3>,
-    fine_multi: Vec<Vec3>,
-    fine_scattered: Vec<Vec3>,
+    pub(super) fine_view: Vec<Vec3>,
+    pub(super) fine_multi: Vec<Vec3>,
+    pub(super) fine_scattered: Vec<Vec3>,
     /// Light clusters for the gather's light selection.
     pub(crate) clusters: LightGrid,
     /// Per cluster: `Σ` power of its lights.
@@ -1015,7 +1017,7 @@ impl InternalLights {
         sum * self.scatter * light.density
     }
 
-    fn eval_sh(coeffs: &[Vec3], y: &[f32]) -> Vec3 {
+    pub(super) fn eval_sh(coeffs: &[Vec3], y: &[f32]) -> Vec3 {
         coeffs
             .iter()
             .zip(y)
@@ -1103,138 +1105,6 @@ impl InternalLights {
             / (4.0 * std::f32::consts::PI);
         s1 + self.multi_coeffs[i * self.sh_count] * Y00
     }
-
-    /// The kernel reconstruction of the multiply scattered part of `J` at
-    /// `p` towards `n` ([method §6](crate::doc::method)): `Σ K_h J_i / Σ K_h` over the lights
-    /// within `h`, with `K_h(r) = (1 − r²/h²)²`; for the optical-depth clock
-    /// the average is taken of `J_i / c_g(x_i)` and multiplied by `c_g(p)`.
-    /// Zero where no light is within `h`. `part` says which part of
-    /// `Σ_{k≥1} J_k`: all of it (`L₁`'s source) or what the walks carried
-    /// through a collision (`L₀`'s, beside the marched single scatter).
-    /// The average is not clamped at zero: a clamp's
-    /// `E[max(X, 0)] ≥ max(E[X], 0)` would bias it upwards wherever `J` is
-    /// small next to its walk noise, with renewed sets (puffs at 96², SH
-    /// order 4, K 64, a fresh set every 2 passes: bias 8.61 % clamped,
-    /// 7.30 % unclamped) and with one set alike (the puffs' dimmer half at
-    /// `s*` 0.25, one set, seeds 8–11: +3.6 % clamped, +0.9 % unclamped;
-    /// [validation](crate::doc::validation) §4). Unclamped, the
-    /// reconstruction is linear in the lights' coefficients.
-    pub fn reconstruct_multi(&self, p: Vec3, n: Vec3, density_at_p: f32, part: Part) -> Vec3 {
-        let scale_p = self.reconstruction_scale(density_at_p);
-        if scale_p <= 0.0 {
-            return Vec3::ZERO;
-        }
-        let coeffs = match part {
-            Part::All => &self.fine_multi,
-            Part::Scattered => &self.fine_scattered,
-        };
-        // The lights' SH series are summed unclamped: clamping each
-        // light's noisy series at zero would bias the average upwards
-        // wherever `J` is small (measured on the forward-scattering puffs
-        // at K = 128: +6.8 % clamped per light, +4.5 % clamped after the
-        // sum). The series is linear in the
-        // coefficients, so the kernel sums them (a contiguous
-        // multiply-add the compiler vectorises) and evaluates the sum
-        // once: on the puffs at 256² (M 16384, SH order 4) this function
-        // took 31 % of a pass evaluating every light's series, and the
-        // pass 4 % less time after (what is left is mostly loading the
-        // lights' coefficients).
-        let width = 3 * self.sh_count;
-        let mut sum = [0.0f32; 3 * MAX_COUNT];
-        let sum = &mut sum[..width];
-        let den = self.kernel_sum(p, bytemuck::cast_slice(coeffs), sum);
-        if den <= 0.0 {
-            return Vec3::ZERO;
-        }
-        let mut y = [0.0f32; MAX_COUNT];
-        sh_basis(self.sh_order, n, &mut y);
-        Self::eval_sh(bytemuck::cast_slice(sum), &y) * (scale_p / den)
-    }
-
-    /// Whether the lights carry the view walks' estimates
-    /// ([`InternalParams::view_walks`]).
-    pub fn has_view(&self) -> bool {
-        !self.view.is_empty()
-    }
-
-    /// The view walks' estimate of light `i` ([`LightSources::view`]), if
-    /// there were view walks.
-    pub fn view(&self, i: usize) -> Option<Vec3> {
-        self.view.get(i).copied()
-    }
-
-    /// `L₀`'s collided part at `p` as the camera sees it: the kernel
-    /// average of the lights' view-walk estimates (the module doc, "Walks
-    /// towards the eye"), in place of
-    /// `reconstruct_multi(p, n, density_at_p, Part::Scattered)` for `n`
-    /// towards the eye. Zero without view walks.
-    pub fn reconstruct_view(&self, p: Vec3, density_at_p: f32) -> Vec3 {
-        let scale_p = self.reconstruction_scale(density_at_p);
-        if scale_p <= 0.0 || self.fine_view.is_empty() {
-            return Vec3::ZERO;
-        }
-        let mut sum = [0.0f32; 3];
-        let den = self.kernel_sum(p, bytemuck::cast_slice(&self.fine_view), &mut sum);
-        if den <= 0.0 {
-            return Vec3::ZERO;
-        }
-        Vec3::from_array(sum) * (scale_p / den)
-    }
-
-    /// Adds `K_h(p − x_i) / c_i` times each kernel light's row of `table`
-    /// (rows of `sum.len()` floats, in the fine grid's slot order) to
-    /// `sum` (`1/c_i` the light's reconstruction scale); returns `Σ K_h`.
-    /// The rows are summed unclamped, a contiguous multiply-add the
-    /// compiler vectorises.
-    #[inline]
-    fn kernel_sum(&self, p: Vec3, table: &[f32], sum: &mut [f32]) -> f32 {
-        let width = sum.len();
-        let mut den = 0.0f32;
-        self.for_each_kernel_slot(p, |slot, k| {
-            let w = k * self.fine_points[slot][3];
-            for (s, &c) in sum.iter_mut().zip(&table[slot * width..(slot + 1) * width]) {
-                *s += w * c;
-            }
-            den += k;
-        });
-        den
-    }
-
-    /// The factor that turns the kernel average back into `Ĵ` at a point of
-    /// density `density_at_p`: 1, or `c_g(p)` for the optical-depth clock.
-    #[inline]
-    pub(crate) fn reconstruction_scale(&self, density_at_p: f32) -> f32 {
-        match self.params.clock {
-            Clock::Geometric => 1.0,
-            Clock::OpticalDepth => self.sigma_grey * density_at_p,
-        }
-    }
-
-    /// Calls `f(i, K_h(p − x_i))` for every light of the reconstruction
-    /// within `h` of `p`, `K_h(r) = (1 − r²/h²)²`.
-    #[inline]
-    pub(crate) fn for_each_kernel_weight(&self, p: Vec3, mut f: impl FnMut(usize, f32)) {
-        let ids = self.fine.ids();
-        self.for_each_kernel_slot(p, |slot, k| f(ids[slot] as usize, k));
-    }
-
-    /// [`InternalLights::for_each_kernel_weight`] by slot of the fine grid
-    /// (the index into `fine.ids()` and the copies aligned with it), the
-    /// positions read from those copies in the order they are stored.
-    #[inline]
-    fn for_each_kernel_slot(&self, p: Vec3, mut f: impl FnMut(usize, f32)) {
-        let h = self.kernel_radius;
-        let inv_h2 = 1.0 / (h * h);
-        self.fine.for_each_near_run(p, h, |run| {
-            for slot in run {
-                let [x, y, z, _] = self.fine_points[slot];
-                let q = (Vec3::new(x, y, z) - p).length_squared() * inv_h2;
-                if q < 1.0 {
-                    f(slot, (1.0 - q) * (1.0 - q));
-                }
-            }
-        });
-    }
 }
 
 /// `π (3 − √5)`, the golden angle of the spherical Fibonacci lattice.
@@ -1256,3 +1126,161 @@ fn random_rotation(rng: &mut Rng) -> glam::Quat {
 
 /// `Y₀₀ = 1 / (2√π)`.
 const Y00: f32 = 0.282_094_8;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::internal::testing::*;
+
+    /// The walks towards the eye estimate what the lights' harmonics hold
+    /// in that direction: over 1024 lights of a sunlit cube (`g` 0, so the
+    /// order-4 series represents `J` closely), the mean of the view walks'
+    /// collided part per unit chance matches the mean of the `Part::Scattered`
+    /// series evaluated towards the eye, each light's within its own walks'
+    /// noise; and towards the eye differs from away from it (the sun comes
+    /// from the camera's side), so walks in the wrong direction fail.
+    /// `reconstruct_view` is the kernel average of those values.
+    #[test]
+    fn view_walks_match_the_harmonics_towards_the_eye() {
+        use crate::physics::lights::Sun;
+        use crate::physics::sh::sh_basis;
+        use std::sync::atomic::AtomicBool;
+        let vol = cube(1.5, 0.9, 0.0);
+        let sun = Lights {
+            suns: vec![Sun {
+                direction: Vec3::new(0.3, -0.2, -1.0).normalize(),
+                irradiance: Vec3::new(1.0, 2.0, 3.0),
+            }],
+            points: Vec::new(),
+            environment: None,
+        };
+        let eye = Vec3::new(0.4, 0.3, 4.0);
+        let params = InternalParams {
+            lights: 1024,
+            walks: 1024,
+            sh_order: 4,
+            kernel_radius: None,
+            view_walks: 1024,
+            eye,
+            view_share: 0.0,
+            view_frame: Default::default(),
+            ..sh1_params(Clock::OpticalDepth, 0.5, 24, 0.3, L1Form::Field)
+        };
+        let cache = InternalLights::build(&vol, &sun, &params, &AtomicBool::new(false))
+            .expect("not cancelled");
+        assert!(cache.has_view());
+        let count = sh_count(4);
+        let mut y = vec![0.0f32; count];
+        let (mut view, mut towards, mut away) = (0.0f64, 0.0f64, 0.0f64);
+        let mut diff2 = 0.0f64;
+        // Only the lights within the camera's reach walk towards the eye;
+        // the others hold their harmonics' value there.
+        let reached = within_view_reach(&vol, &params, cache.kernel_radius, &cache.lights);
+        let mut walked = 0usize;
+        for (i, &within) in reached.iter().enumerate() {
+            let x = cache.lights[i].position;
+            let n = (eye - x).normalize();
+            let v = cache.view(i).expect("a view estimate").element_sum() as f64;
+            sh_basis(4, n, &mut y);
+            let t = cache.eval_scattered_with(i, &y).element_sum() as f64;
+            if !within {
+                // (The harmonics' value unclamped: compared clamped.)
+                let v = cache
+                    .view(i)
+                    .expect("a view estimate")
+                    .max(Vec3::ZERO)
+                    .element_sum() as f64;
+                assert!(
+                    (v - t).abs() <= 1e-5 * t.abs().max(1e-3),
+                    "light {i} out of reach: view {v}, harmonics {t}"
+                );
+                continue;
+            }
+            walked += 1;
+            sh_basis(4, -n, &mut y);
+            away += cache.eval_scattered_with(i, &y).element_sum() as f64;
+            view += v;
+            towards += t;
+            diff2 += (v - t) * (v - t);
+        }
+        assert!(
+            walked > 200 && walked < cache.len(),
+            "{walked} of {} lights within reach: the test needs both kinds",
+            cache.len()
+        );
+        let m = walked as f64;
+        let (view, towards, away) = (view / m, towards / m, away / m);
+        let se = (diff2 / m - (view - towards).powi(2)).max(0.0).sqrt() / m.sqrt();
+        eprintln!("view walks {view:.5}, harmonics towards the eye {towards:.5} (se {se:.5}), away {away:.5}");
+        assert!(
+            (view - towards).abs() < 4.0 * se && (view - towards).abs() < 0.05 * towards,
+            "view walks {view:.5}, harmonics towards the eye {towards:.5} (se {se:.5})"
+        );
+        assert!(
+            (away - towards).abs() > 0.2 * towards,
+            "towards the eye {towards:.5} and away {away:.5} hardly differ: the test cannot tell"
+        );
+        // The reconstruction is the normalised kernel average of the views.
+        let p = Vec3::new(0.1, -0.2, 0.3);
+        let (mut num, mut den) = (Vec3::ZERO, 0.0f32);
+        cache.for_each_kernel_weight(p, |i, k| {
+            let scale = 1.0 / (1.5 * cache.lights[i].density);
+            num += cache.view(i).expect("a view estimate") * (k * scale);
+            den += k;
+        });
+        let want = num / den * 1.5;
+        let got = cache.reconstruct_view(p, 1.0);
+        assert!(
+            (got - want).abs().max_element() <= 1e-4 * want.max_element(),
+            "reconstruct_view {got}, kernel average {want}"
+        );
+    }
+
+    /// A light is within the camera's reach when the clock along its own
+    /// ray from the eye, from the box's entry up to `reach` short of it,
+    /// stays within `s*`: in a cube of extinction 2 seen along −z, at
+    /// `s*` 0.5 and reach 0.1, down to depth 0.35 for the optical-depth
+    /// clock (2 (d − 0.1) ≤ 0.5) and 0.6 for the geometric one; lights
+    /// the ray meets after crossing the box elsewhere count too.
+    #[test]
+    fn view_reach_follows_the_window_along_each_ray() {
+        let vol = cube(2.0, 0.9, 0.0);
+        let at = |depth: f32, x: f32| InternalLight {
+            position: Vec3::new(x, 0.1, 1.0 - depth),
+            density: 1.0,
+            weight: 1.0,
+        };
+        let lights = [
+            at(0.05, 0.0),
+            at(0.3, 0.0),
+            at(0.4, 0.0),
+            at(0.55, 0.3),
+            at(0.65, 0.3),
+            at(1.9, -0.5),
+        ];
+        let eye = Vec3::new(0.0, 0.1, 6.0);
+        for (clock, want) in [
+            (
+                Clock::OpticalDepth,
+                [true, true, false, false, false, false],
+            ),
+            (Clock::Geometric, [true, true, true, true, false, false]),
+        ] {
+            let params = InternalParams {
+                view_walks: 4,
+                eye,
+                ..sh1_params(clock, 0.5, 4, 0.1, L1Form::Field)
+            };
+            let got = within_view_reach(&vol, &params, 0.1, &lights);
+            assert_eq!(got, want, "{clock:?}");
+        }
+        // Seen from the side the same deep light is near the surface.
+        let params = InternalParams {
+            view_walks: 4,
+            eye: Vec3::new(-6.0, 0.1, 1.0 - 1.9),
+            ..sh1_params(Clock::OpticalDepth, 0.5, 4, 0.1, L1Form::Field)
+        };
+        let side = within_view_reach(&vol, &params, 0.1, &[at(1.9, -0.9)]);
+        assert_eq!(side, [true]);
+    }
+}

@@ -32,9 +32,9 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::gated_walk::{march_clock, Clock, ClockMarch};
-use super::rng::Rng;
-use super::volume::{DensityField, Volume};
+use super::clock::{march_clock, Clock, ClockMarch};
+use crate::physics::rng::Rng;
+use crate::physics::volume::{DensityField, Volume};
 
 /// Stream index of the placement in the camera's windows (apart from the
 /// density placement's, the walks' and the renders').

@@ -1,0 +1,828 @@
+//! The time-gated backward walk that estimates the path-length series
+//! `J_N = Σ_{k=0}^{N} G(k s*) S₁` at a point ([method §3–§4](crate::doc::method)).
+//!
+//! # What the walk estimates
+//!
+//!
+//! Let a backward walk start at `z` and fly along `−n` (`n` is the
+//! direction light travels at `z`): free flights sample collisions with
+//! rate `c` (spectral tracking), each real collision multiplies the weight
+//! by the albedo `α` and picks a new direction from the phase function,
+//! and leaving the box `B` ends the walk (outside `B` is vacuum, so it never
+//! comes back and `S₁ = 0` there). The track-length estimator of the
+//! radiance is then
+//!
+//! `L(z, n) = E[ ∫₀^∞ W(ℓ) S₁(y(ℓ), n(ℓ)) dℓ ]`,
+//!
+//! where `ℓ` is the walk's geometric path length, `y(ℓ)` its position,
+//! `n(ℓ)` minus its direction, and `W(ℓ)` its weight just then (the product
+//! of albedos, times the spectral-tracking ratios). Exchanging `E` and `∫`
+//! gives `L = ∫₀^∞ dℓ G(ℓ) S₁` with
+//!
+//! `G(s) S₁ (z, n) = E[ W(s) S₁(y(s), n(s)) ]`.
+//!
+//! This is exactly the backward (adjoint) form of the time-dependent
+//! transport equation `∂_s u + n·∇u = −c u + b ∫P u`, `u(0) = S₁`: a flight
+//! of length `s` without real collision keeps the weight with probability
+//! `T`, and a collision contributes `b/c = α` times the phase-sampled
+//! continuation. So one walk sampled at the gate times `s = k s*` gives an
+//! unbiased estimate of every term `J_k = G(k s*) S₁`, and the flights are
+//! memoryless, so a flight simply continues past a gate. Note that `S₁`
+//! includes the factor `b(y)`: at a gate in empty space it is zero even
+//! though the walk carries weight there.
+//!
+//! The clock it is gated by is [`super::clock`]'s, its directions after a
+//! collision are guided by [`super::guiding`].
+
+use glam::Vec3;
+
+use super::clock::{march_clock, Clock, ClockLattice, ClockMarch, GateSettings};
+use super::guiding::{guided_direction, GUIDED_COLLISIONS};
+use crate::physics::lights::Lights;
+use crate::physics::phase;
+use crate::physics::reference::single_scatter_source;
+use crate::physics::rng::Rng;
+use crate::physics::tracking::{free_flight, spectral_event, TentativeEvent, TentativeSteps};
+use crate::physics::volume::{DensityField, Volume};
+
+/// Runs one backward walk from `z` along `−n` (`n`: the direction light
+/// travels at `z`), calling `on_gate(k, weight, z_k, n_k)` each time the
+/// clock reaches `k · s*`, `k = 0..=N`: `z_k` is the walk's position then,
+/// `n_k` the direction light travels there, `weight` the walk's RGB weight
+/// (so that `E[weight · f(z_k, n_k)] = G(k s*) f (z, n)`). Gate 0 fires at
+/// `z` with weight 1. The walk ends after gate `N`, on leaving the medium's
+/// box, by Russian roulette, or when its weight vanishes.
+pub fn gated_walk<D: DensityField>(
+    vol: &Volume<D>,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    rng: &mut Rng,
+    mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3),
+) {
+    walk(
+        vol,
+        z,
+        n,
+        settings,
+        None,
+        rng,
+        |k, w, p, dir, _, _| on_gate(k, w, p, dir),
+        None,
+    );
+}
+
+/// Adds one walk's estimate of `Ĵ_k(z, n)`, `k = 0..out.len()−1` (at most
+/// `N`), to `out`: with the geometric clock `Ĵ_k = J_k = G(k s*) S₁`, each
+/// gate adding `weight · b(z_k) · (S₁/b)(z_k, n_k)`; with the optical-depth
+/// clock `Ĵ_k = c_g(z) J^τ_k`, each gate adding
+/// `weight · ρ(z) · α σ_t · (S₁/b)(z_k, n_k)` (see the module doc). `out[1]`
+/// is the note's internal light source `F`.
+pub fn accumulate_j<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    rng: &mut Rng,
+    out: &mut [Vec3],
+) {
+    accumulate_j_from(vol, lights, z, n, settings, 0, rng, out, None);
+}
+
+/// [`accumulate_j`] for the terms `k ≥ first` only (the others are left
+/// untouched and cost no shadow rays): the internal lights evaluate the
+/// `k = 0` term, `S₁` itself, exactly and need the walk only for `k ≥ 1`.
+/// With `unscattered`, also adds to it the part of each term that the walk
+/// carried to its gate without a real collision: the single scatter
+/// `T S₁` from `k s*` further along `−n`, which the final gather marches
+/// exactly (the single scatter beyond the window) instead of reading it
+/// back from the lights' spherical harmonics. The walk's directions after
+/// collisions are guided towards the external lights
+/// ([`guided_direction`]).
+#[allow(clippy::too_many_arguments)] // accumulate_j's, `first` and one more output
+pub fn accumulate_j_from<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    first: u32,
+    rng: &mut Rng,
+    out: &mut [Vec3],
+    unscattered: Option<&mut [Vec3]>,
+) {
+    accumulate_j_guided(
+        vol,
+        lights,
+        z,
+        n,
+        settings,
+        first,
+        true,
+        rng,
+        out,
+        unscattered,
+    );
+}
+
+/// [`accumulate_j_from`], with the directions after collisions guided
+/// towards the lights or (`guided` false) from the phase function alone.
+#[allow(clippy::too_many_arguments)] // accumulate_j_from's and the switch
+pub fn accumulate_j_guided<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    first: u32,
+    guided: bool,
+    rng: &mut Rng,
+    out: &mut [Vec3],
+    mut unscattered: Option<&mut [Vec3]>,
+) {
+    let gates = match &unscattered {
+        Some(u) => out.len().min(u.len()),
+        None => out.len(),
+    }
+    .min(settings.gate_count());
+    if gates == 0 {
+        return;
+    }
+    let limited = GateSettings {
+        n_terms: (gates - 1) as u32,
+        ..*settings
+    };
+    gate_sources(
+        vol,
+        lights,
+        z,
+        n,
+        &limited,
+        first,
+        guided,
+        false,
+        rng,
+        |k, v, scattered| {
+            out[k as usize] += v;
+            if let (false, Some(u)) = (scattered, unscattered.as_deref_mut()) {
+                u[k as usize] += v;
+            }
+        },
+    );
+}
+
+/// What one guided walk from `z` carried to its gates `k = 1..=N` through
+/// a collision: [`collided`](super::chances::collided) of [`accumulate_j_from`]'s two outputs (the
+/// same estimator), without the shadow rays of the gates it passes before
+/// its first collision, whose share that difference removes again. The
+/// walks towards the eye need nothing else: on the puffs at `s* = 0.25`,
+/// 128 of them per light within reach, a light set took 1.74 s with
+/// every gate's shadow ray and 1.61 s with these (three runs each).
+pub fn accumulate_collided<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    rng: &mut Rng,
+) -> Vec3 {
+    let mut sum = Vec3::ZERO;
+    gate_sources(
+        vol,
+        lights,
+        z,
+        n,
+        settings,
+        1,
+        true,
+        true,
+        rng,
+        |_, v, _| sum += v,
+    );
+    sum
+}
+
+/// The walk behind [`accumulate_j_guided`] and [`accumulate_collided`]:
+/// calls `add(k, v, scattered)` with each gate's `v = w · α σ_t · ρ ·
+/// (S₁/b)(z_k, n_k)` for `k ≥ first` (`scattered`: the walk collided
+/// before the gate); with `collided_only`, gates before the first
+/// collision are skipped without their shadow rays.
+#[allow(clippy::too_many_arguments)] // accumulate_j_guided's and the switch
+fn gate_sources<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    first: u32,
+    guided: bool,
+    collided_only: bool,
+    rng: &mut Rng,
+    mut add: impl FnMut(u32, Vec3, bool),
+) {
+    let scatter = vol.optics.albedo * vol.optics.sigma_t;
+    let rho_z = vol.density.density(z);
+    if settings.clock == Clock::OpticalDepth && rho_z <= 0.0 {
+        return;
+    }
+    walk(
+        vol,
+        z,
+        n,
+        settings,
+        guided.then_some(lights),
+        rng,
+        |k, w, zk, nk, scattered, rng| {
+            if k < first || w == Vec3::ZERO || (collided_only && !scattered) {
+                return;
+            }
+            let rho = match settings.clock {
+                Clock::Geometric => vol.density.density(zk),
+                Clock::OpticalDepth => rho_z,
+            };
+            if rho <= 0.0 {
+                return;
+            }
+            let source = single_scatter_source(vol, lights, zk, nk, rng);
+            add(k, w * scatter * rho * source, scattered);
+        },
+        None,
+    );
+}
+
+/// One walk's estimate of `Ĵ_k(z, n)` for `k = 0..=N` (see
+/// [`accumulate_j`]).
+pub fn estimate_j<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    rng: &mut Rng,
+) -> Vec<Vec3> {
+    let mut out = vec![Vec3::ZERO; settings.gate_count()];
+    accumulate_j(vol, lights, z, n, settings, rng, &mut out);
+    out
+}
+
+/// How one flight of a walk ends.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Flight {
+    /// A real collision at ray parameter `t`. With the geometric clock, or
+    /// when the optical-depth clock was resolved, `advanced` is how far the
+    /// clock advanced since the flight's start; `None` when the flight was
+    /// left pending in the [`LazyClock`].
+    Collision { t: f32, advanced: Option<f32> },
+    /// The clock reached the next gate at ray parameter `t` first.
+    Gate(f32),
+    /// The flight left the box (or can carry no more light) first.
+    Exit,
+}
+
+/// Pending flights a [`LazyClock`] holds before it resolves them anyway.
+const LAZY_CLOCK_PENDING: usize = 16;
+
+/// The optical-depth clock of one walk, marched only when a gate may be
+/// near. A flight that ends in a collision while its majorant optical depth
+/// (spectral tracking draws it anyway: the sum of the exponential steps)
+/// shows that the clock cannot have reached the next gate is kept pending,
+/// unmarched: the midpoint quadrature of `c_g` never exceeds the majorant,
+/// so `exact + Σ pending ≤ exact + slack`. The pending flights are marched
+/// (each with its lattice anchored at its start, as an eager flight's
+/// would be) only when a gate may come within the bound, so a walk that
+/// leaves the medium before its next gate never marches its last flights
+/// at all (the clock's quadrature was about half of the re-sampling time on
+/// the puffs before).
+struct LazyClock {
+    /// The window `s*` (which fixes the quadrature lattice).
+    s_star: f32,
+    /// The clock at the start of the first pending flight.
+    exact: f32,
+    /// Upper bound of the pending flights' clock.
+    slack: f32,
+    /// Pending flights: `(origin, dir, t_start, t_end, t_exit)` (`t_exit`:
+    /// where the ray leaves the box, which fixes the quadrature lattice).
+    pending: [(Vec3, Vec3, f32, f32, f32); LAZY_CLOCK_PENDING],
+    len: usize,
+}
+
+impl LazyClock {
+    fn new(s_star: f32, exact: f32) -> Self {
+        Self {
+            s_star,
+            exact,
+            slack: 0.0,
+            pending: [(Vec3::ZERO, Vec3::ZERO, 0.0, 0.0, 0.0); LAZY_CLOCK_PENDING],
+            len: 0,
+        }
+    }
+
+    /// Marches the pending flights; returns the exact clock after them.
+    fn resolve<D: DensityField>(&mut self, vol: &Volume<D>) -> f32 {
+        for &(origin, dir, t0, t1, t_exit) in &self.pending[..self.len] {
+            if let ClockMarch::Exhausted(d) = march_clock(
+                vol,
+                Clock::OpticalDepth,
+                self.s_star,
+                origin,
+                dir,
+                t0,
+                t_exit,
+                t1,
+                f32::INFINITY,
+            ) {
+                self.exact += d;
+            }
+        }
+        self.len = 0;
+        self.slack = 0.0;
+        self.exact
+    }
+
+    /// Keeps the flight `origin + t dir`, `t ∈ [t0, t1]` (the ray leaving
+    /// the box at `t_exit`), whose clock is at most `bound`, pending.
+    fn defer<D: DensityField>(
+        &mut self,
+        vol: &Volume<D>,
+        flight: (Vec3, Vec3, f32, f32, f32),
+        bound: f32,
+    ) {
+        if self.len == LAZY_CLOCK_PENDING {
+            self.resolve(vol);
+        }
+        self.pending[self.len] = flight;
+        self.len += 1;
+        self.slack += bound;
+    }
+}
+
+/// One flight with the optical-depth clock over `[t_enter, t_exit]` of
+/// `origin + t dir`, the next gate at clock `gate_clock`, in one traversal
+/// of the majorant cells: spectral tracking's tentative collisions in
+/// order and, once a gate may be near, the clock alongside them. While the
+/// majorant optical depth says the gate cannot have come (see
+/// [`LazyClock`]) nothing is marched; at the first tentative collision
+/// where it might have, the pending flights and this one so far are
+/// marched ([`march_clock`]), and from there the clock advances with the
+/// tracking, on the lattice [`march_clock`] would use from `t_enter`
+/// ([`ClockLattice`]: a step's density is sampled once however many
+/// tentative collisions fall in it), stopping at the gate if it comes
+/// before the next tentative collision. Tentative collisions past the gate
+/// are never drawn into the weight, so this is the same estimator as
+/// tracking to the gate: flights are memoryless.
+#[allow(clippy::too_many_arguments)] // one flight: ray, span, gate, state
+fn optical_depth_flight<D: DensityField>(
+    vol: &Volume<D>,
+    origin: Vec3,
+    dir: Vec3,
+    t_enter: f32,
+    t_exit: f32,
+    gate_clock: f32,
+    lazy: &mut LazyClock,
+    weight: &mut Vec3,
+    rng: &mut Rng,
+) -> Flight {
+    // Bound mode: `bound` is an upper bound of the clock since
+    // `lazy.exact`. Exact mode (`resolved`): `clock` is the clock from
+    // `t_enter` to the current position on top of `lazy.exact`.
+    let mut resolved = false;
+    let mut bound = lazy.slack;
+    let mut clock = 0.0f32;
+    let mut lattice = ClockLattice::new(vol, lazy.s_star, origin, dir);
+    let mut outcome = None;
+    // Marches the pending flights, then this one from its start to `to`
+    // against what is left to the gate.
+    let resolve_to = |lazy: &mut LazyClock, to: f32| {
+        let exact = lazy.resolve(vol);
+        march_clock(
+            vol,
+            Clock::OpticalDepth,
+            lazy.s_star,
+            origin,
+            dir,
+            t_enter,
+            t_exit,
+            to,
+            gate_clock - exact,
+        )
+    };
+    let mut steps = TentativeSteps::new(rng);
+    vol.majorants.walk(origin, dir, t_enter, t_exit, |a, b, m| {
+        let mut t = a;
+        loop {
+            let next = steps.next(t, b, m);
+            if resolved && m > 0.0 {
+                let left = gate_clock - lazy.exact;
+                let to = next.unwrap_or(b);
+                if let Some(t_gate) = lattice.advance(a, b, m, t, to, &mut clock, left) {
+                    outcome = Some(Flight::Gate(t_gate));
+                    return false;
+                }
+            }
+            let Some(t_event) = next else {
+                return true;
+            };
+            t = t_event;
+            if !resolved {
+                bound += steps.depth();
+                if lazy.exact + bound >= gate_clock {
+                    resolved = true;
+                    match resolve_to(lazy, t) {
+                        ClockMarch::Reached(t_gate) => {
+                            outcome = Some(Flight::Gate(t_gate));
+                            return false;
+                        }
+                        ClockMarch::Exhausted(d) => clock = d,
+                    }
+                }
+            }
+            match spectral_event(vol, origin + dir * t, m, weight, rng) {
+                TentativeEvent::Real => {
+                    outcome = Some(Flight::Collision {
+                        t,
+                        advanced: resolved.then_some(clock),
+                    });
+                    return false;
+                }
+                TentativeEvent::Null => {}
+                TentativeEvent::Dead => {
+                    outcome = Some(Flight::Exit);
+                    return false;
+                }
+            }
+            steps.redraw(rng);
+        }
+    });
+    if let Some(outcome) = outcome {
+        if let Flight::Collision { t, advanced: None } = outcome {
+            lazy.defer(vol, (origin, dir, t_enter, t, t_exit), bound - lazy.slack);
+        }
+        return outcome;
+    }
+    if resolved {
+        // The clock was followed to the exit without reaching the gate.
+        return Flight::Exit;
+    }
+    // Bound mode to the exit: is there a gate on the way?
+    if lazy.exact + bound + steps.used() < gate_clock {
+        return Flight::Exit;
+    }
+    match resolve_to(lazy, t_exit) {
+        ClockMarch::Reached(t_gate) => Flight::Gate(t_gate),
+        ClockMarch::Exhausted(_) => Flight::Exit,
+    }
+}
+
+/// The walk itself; with `guide`, its directions after a collision come
+/// from [`guided_direction`] towards those lights. `on_gate(k, weight, z_k,
+/// n_k, scattered, rng)` also
+/// learns whether the walk has collided yet and receives the random stream,
+/// so that the caller can trace shadow rays; `on_collision(clock)`, if
+/// given, is called at every real collision with the clock's value there (a
+/// hook for tests: it makes the optical-depth clock resolve at every
+/// collision).
+#[allow(clippy::too_many_arguments)] // the start, the gates, the guide, the stream and two callbacks
+fn walk<D: DensityField>(
+    vol: &Volume<D>,
+    z: Vec3,
+    n: Vec3,
+    settings: &GateSettings,
+    guide: Option<&Lights>,
+    rng: &mut Rng,
+    mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, bool, &mut Rng),
+    mut on_collision: Option<&mut dyn FnMut(f32)>,
+) {
+    let s_star = settings.s_star.max(0.0);
+    let last = settings.n_terms;
+    let mut weight = Vec3::ONE;
+    on_gate(0, weight, z, n, false, rng);
+    if last == 0 {
+        return;
+    }
+    let mut next = 1u32;
+    let mut origin = z;
+    let mut dir = -n;
+    // The clock at `origin`: exactly `lazy.exact` with the geometric clock
+    // (which is never pending), `lazy.exact` plus the pending flights with
+    // the optical-depth clock.
+    let mut lazy = LazyClock::new(s_star, 0.0);
+    let mut collisions = 0u32;
+    // One flight per iteration: from `origin` to the next gate, the next
+    // real collision, or the exit of the box, whichever comes first.
+    loop {
+        let Some((t_enter, t_exit)) = vol.clip(origin, dir) else {
+            return;
+        };
+        let clock_at_enter = match settings.clock {
+            Clock::Geometric => lazy.exact + t_enter,
+            Clock::OpticalDepth => lazy.exact,
+        };
+        // Gates in the vacuum before the box (only when `z` is outside it,
+        // and only for the geometric clock).
+        while settings.clock == Clock::Geometric && next as f32 * s_star <= clock_at_enter {
+            let t = next as f32 * s_star - lazy.exact;
+            on_gate(next, weight, origin + dir * t, -dir, collisions > 0, rng);
+            if next == last {
+                return;
+            }
+            next += 1;
+        }
+        let gate_clock = next as f32 * s_star;
+        let flight = match settings.clock {
+            Clock::OpticalDepth => optical_depth_flight(
+                vol,
+                origin,
+                dir,
+                t_enter,
+                t_exit,
+                gate_clock,
+                &mut lazy,
+                &mut weight,
+                rng,
+            ),
+            Clock::Geometric => {
+                // The gate is `budget` further along the ray, the
+                // collision wherever tracking puts it before then.
+                let budget = gate_clock - clock_at_enter;
+                let gate_t = (t_enter + budget <= t_exit).then_some(t_enter + budget);
+                match free_flight(
+                    vol,
+                    origin,
+                    dir,
+                    t_enter,
+                    gate_t.unwrap_or(t_exit),
+                    &mut weight,
+                    rng,
+                ) {
+                    Some(t_hit) => Flight::Collision {
+                        t: t_hit,
+                        advanced: Some(t_hit),
+                    },
+                    None => gate_t.map_or(Flight::Exit, Flight::Gate),
+                }
+            }
+        };
+        match flight {
+            Flight::Collision { t: t_hit, advanced } => {
+                if let Some(advanced) = advanced {
+                    // Rounding must not put the collision past the gate.
+                    lazy.exact = (lazy.exact + advanced).min(gate_clock);
+                }
+                origin += dir * t_hit;
+                if let Some(hook) = on_collision.as_deref_mut() {
+                    hook(lazy.resolve(vol).min(gate_clock));
+                }
+                weight *= vol.optics.albedo;
+                collisions += 1;
+                if collisions >= settings.rr_start {
+                    let q = weight.max_element().min(0.95);
+                    if q <= 0.0 || rng.next_f32() >= q {
+                        return;
+                    }
+                    weight /= q;
+                }
+                let (u1, u2) = (rng.next_f32(), rng.next_f32());
+                dir = match guide.filter(|_| collisions <= GUIDED_COLLISIONS) {
+                    Some(lights) => {
+                        let (d, factor) =
+                            guided_direction(vol.optics.g, lights, origin, dir, u1, u2, rng);
+                        weight *= factor;
+                        d
+                    }
+                    None => phase::sample_hg(vol.optics.g, dir, u1, u2),
+                };
+            }
+            Flight::Exit => return,
+            Flight::Gate(t) => {
+                if weight == Vec3::ZERO {
+                    return;
+                }
+                origin += dir * t;
+                on_gate(next, weight, origin, -dir, collisions > 0, rng);
+                if next == last {
+                    return;
+                }
+                next += 1;
+                // The flight goes on from the gate: flights are memoryless,
+                // and the quadrature lattice is re-anchored here. A gate is
+                // only found with the clock resolved: nothing is pending.
+                debug_assert_eq!(lazy.len, 0);
+                lazy.exact = gate_clock;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::internal::clock::{clock_cell, clock_step};
+    use crate::physics::internal::testing::*;
+
+    /// Collisions per window of the clock for `walks` walks: a histogram of
+    /// counts in windows `1..=N` (the windows between consecutive gates).
+    fn window_counts(vol: &Volume<Field>, settings: &GateSettings, walks: u32) -> Vec<u64> {
+        let mut hist = vec![0u64; 64];
+        for w in 0..walks {
+            let mut rng = Rng::for_sample(5, w, 0);
+            let mut per_window = vec![0usize; settings.n_terms as usize];
+            let s = settings.s_star;
+            walk(
+                vol,
+                Vec3::ZERO,
+                Vec3::Z,
+                settings,
+                None,
+                &mut rng,
+                |_, _, _, _, _, _| {},
+                Some(&mut |clock: f32| {
+                    let k = (clock / s).floor() as usize;
+                    if k < per_window.len() {
+                        per_window[k] += 1;
+                    }
+                }),
+            );
+            for c in per_window {
+                hist[c.min(63)] += 1;
+            }
+        }
+        hist
+    }
+
+    /// [`accumulate_collided`] skips the shadow rays of the gates before
+    /// the first collision and keeps the estimator: in the medium of
+    /// `guided_walks_keep_the_mean`, its mean agrees per channel with
+    /// [`collided`](super::chances::collided) of [`accumulate_j_from`]'s outputs within 4.5 standard
+    /// errors of the difference, and both are far from the uncollided
+    /// part it leaves out (which would show if it kept or lost a share).
+    #[test]
+    fn collided_walks_match_the_collided_part() {
+        let (vol, lights, settings, z, n) = forward_scattering_walk();
+        let walks = 200_000u32;
+        let mut uncollided = Vec3::ZERO;
+        let (full, full_var) = mean_and_its_variance(walks, 23, 0, |rng| {
+            let (collided, before) = split_walk(&vol, &lights, &settings, z, n, true, rng);
+            uncollided += before;
+            collided
+        });
+        uncollided /= walks as f32;
+        let (skip, skip_var) = mean_and_its_variance(walks, 23, 1, |rng| {
+            accumulate_collided(&vol, &lights, z, n, &settings, rng)
+        });
+        eprintln!("collided {full} (with every gate), {skip} (skipping), uncollided {uncollided}");
+        for c in 0..3 {
+            let se = (full_var[c] + skip_var[c]).sqrt();
+            assert!(
+                (full[c] - skip[c]).abs() < 4.5 * se,
+                "channel {c}: with every gate {} skipping {} (se {se})",
+                full[c],
+                skip[c]
+            );
+            assert!(
+                uncollided[c] > 10.0 * se,
+                "channel {c}: the test cannot tell a lost share"
+            );
+        }
+    }
+
+    #[test]
+    fn collisions_per_window_are_poisson() {
+        // Collisions in each of the windows of 20 000 walks against
+        // Poisson(s*); the 99.9th percentile of χ² for ≤ 10 degrees of
+        // freedom is ≤ 29.6.
+        let check = |vol: &Volume<Field>, clock, s_star: f32, n_terms, label: &str| {
+            let settings = GateSettings {
+                s_star,
+                n_terms,
+                clock,
+                rr_start: u32::MAX,
+            };
+            let hist = window_counts(vol, &settings, 20_000);
+            let (chi2, dof) = chi2_poisson(&hist, s_star as f64);
+            eprintln!("{label}: χ² = {chi2:.1} with {dof} dof");
+            assert!(dof >= 4 && chi2 < 29.6, "{label}: χ² = {chi2}, dof = {dof}");
+        };
+        // Homogeneous, geometric clock: Poisson(σ_t s*) per window.
+        check(
+            &volume(1.0, 0.0, 1.0),
+            Clock::Geometric,
+            1.7,
+            6,
+            "geometric",
+        );
+
+        // Heterogeneous, optical-depth clock: Poisson(τ*) per window
+        // whatever the density (src/doc/method.md §7), on split and whole cells: a
+        // dense field (majorant optical depth 0.84 across a cell, over two
+        // quarters of τ* = 1.3: three steps per cell) and a thin one (0.26:
+        // one step).
+        for (base, amp, steps) in [(1.0f32, 0.8f32, 3.0f32), (0.3, 0.25, 1.0)] {
+            // Majorant cells of 120/256 ≈ 0.47 resolve sin(x) sin(y), over
+            // a box that 5 windows of τ* = 1.3 never leave (a walk of ~7
+            // collisions moves a few units where ρ ≈ 1, ~25 where ρ ≈ 0.3).
+            let vol = boxed(base, amp, 1.0, 60.0, 256);
+            let cell = clock_cell(&vol);
+            assert_eq!(clock_step(cell, base + amp, 1.3), cell / steps);
+            let label = format!("optical depth, ρ̄ = {base}");
+            check(&vol, Clock::OpticalDepth, 1.3, 5, &label);
+        }
+    }
+
+    #[test]
+    fn lazy_clock_finds_the_same_gates() {
+        // Marching consumes no random numbers, so a walk that keeps flights
+        // pending (no hook) and one that resolves its clock at every
+        // collision (the hook) take the same path: they must report the
+        // same gates at the same places. A gate that the majorant bound
+        // skipped, or a pending flight counted twice, would move them.
+        // Unbounded (walks reach every gate) and a small box (walks leave
+        // it, through the bound's exit check).
+        for half in [60.0f32, 2.0] {
+            let vol = boxed(1.0, 0.8, 0.9, half, (half * 4.0) as u32);
+            let settings = GateSettings {
+                s_star: 2.5,
+                n_terms: 8,
+                clock: Clock::OpticalDepth,
+                rr_start: u32::MAX,
+            };
+            let (mut gates, mut pending_gates) = (0usize, 0usize);
+            for w in 0..4000u32 {
+                let run = |resolve_each: bool| {
+                    let mut rng = Rng::for_sample(11, w, 0);
+                    let mut out = Vec::new();
+                    let mut hook = |_: f32| {};
+                    walk(
+                        &vol,
+                        Vec3::new(0.3, -0.2, 0.1),
+                        Vec3::Z,
+                        &settings,
+                        None,
+                        &mut rng,
+                        |k, _, p, _, scattered, _| out.push((k, p, scattered)),
+                        resolve_each.then_some(&mut hook as &mut dyn FnMut(f32)),
+                    );
+                    out
+                };
+                let (lazy, eager) = (run(false), run(true));
+                assert_eq!(lazy.len(), eager.len(), "walk {w}: {lazy:?} vs {eager:?}");
+                for (a, b) in lazy.iter().zip(&eager) {
+                    assert_eq!((a.0, a.2), (b.0, b.2), "walk {w}");
+                    assert!((a.1 - b.1).length() < 1e-4, "walk {w}: {a:?} vs {b:?}");
+                }
+                gates += lazy.len();
+                pending_gates += lazy.iter().filter(|g| g.2).count();
+            }
+            eprintln!("box ±{half}: {gates} gates, {pending_gates} after a collision");
+            assert!(
+                pending_gates > 2000,
+                "too few gates after collisions to test"
+            );
+        }
+    }
+
+    #[test]
+    fn albedo_one_conserves_the_weight() {
+        // With α = 1 and no boundary, every gate is reached, and the weight
+        // there is exactly 1 without Russian roulette, and 1 on average
+        // with it.
+        let vol = volume(0.7, 0.0, 1.0);
+        for (rr_start, exact) in [(u32::MAX, true), (2, false)] {
+            let settings = GateSettings {
+                s_star: 2.0,
+                n_terms: 12,
+                clock: Clock::Geometric,
+                rr_start,
+            };
+            let walks = 20_000u32;
+            let mut sum = [0.0f64; 13];
+            let mut sum2 = [0.0f64; 13];
+            for w in 0..walks {
+                let mut rng = Rng::for_sample(8, w, 1);
+                gated_walk(
+                    &vol,
+                    Vec3::ZERO,
+                    Vec3::X,
+                    &settings,
+                    &mut rng,
+                    |k, wt, _, _| {
+                        if exact {
+                            assert!((wt - Vec3::ONE).abs().max_element() < 1e-5, "{wt}");
+                        }
+                        sum[k as usize] += wt.x as f64;
+                        sum2[k as usize] += (wt.x as f64).powi(2);
+                    },
+                );
+            }
+            for k in 0..=12 {
+                let mean = sum[k] / walks as f64;
+                let var = (sum2[k] / walks as f64 - mean * mean).max(0.0);
+                let se = (var / walks as f64).sqrt();
+                assert!(
+                    (mean - 1.0).abs() <= 4.0 * se + 1e-6,
+                    "rr_start {rr_start}, gate {k}: mean weight {mean} ± {se}"
+                );
+            }
+        }
+    }
+}
