@@ -648,7 +648,7 @@ use lantern::physics::internal::chances::collided_per_unit_chance;
 use lantern::physics::internal::clock::GateSettings;
 use lantern::physics::internal::placement::PlacementDensity;
 use lantern::physics::internal::sources::{InternalParams, PLACEMENT_RESOLUTION};
-use lantern::physics::internal::walk::accumulate_j_from;
+use lantern::physics::internal::walk::Walks;
 use lantern::physics::reference::RR_START_DEPTH;
 use lantern::physics::rng::Rng;
 use lantern::physics::sh::sh_basis;
@@ -878,12 +878,9 @@ fn cpu_walks(
         let n = Vec3::new(s * phi.cos(), s * phi.sin(), z);
         per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
         unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
-        accumulate_j_from(
-            vol,
-            lights,
+        Walks::guided(vol, lights, gate).accumulate_j_from(
             x,
             n,
-            &gate,
             1,
             &mut rng,
             &mut per_walk,

@@ -1,8 +1,9 @@
 // The path-length clock and the time-gated backward walk that estimates
 // `J_N = Σ_{k=0}^{N} G(k s*) S₁` at a point (src/doc/method.md §3, §4, §7). Mirrors
-// src/physics/internal/walk.rs: `march_clock`, the private `walk` and
-// `accumulate_j_from`. WGSL has no closures, so the CPU's `on_gate`
-// callback of `accumulate_j_from` is written out as `gate_add`.
+// src/physics/internal/clock.rs (`march_clock`) and walk.rs (the private
+// `Walks::walk` and `Walks::accumulate_j_from`). WGSL has no closures, so
+// the CPU's `on_gate` callback of `accumulate_j_from` is written out as
+// `gate_add`.
 
 // From Rust (the generated prelude, src/gpu/shaders.rs): the clock tags
 // `CLOCK_*` (crate::scene::Clock::tag); the largest majorant optical

@@ -40,7 +40,7 @@ use crate::cpu::pixel_ray;
 use crate::physics::internal::clock::GateSettings;
 use crate::physics::internal::gather::{gather, GatherSample};
 use crate::physics::internal::sources::InternalLights;
-use crate::physics::internal::walk::accumulate_j_from;
+use crate::physics::internal::walk::Walks;
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::rng::Rng;
 use crate::render::{internal_params_for_set, Prepared};
@@ -232,12 +232,9 @@ pub fn light_walk_stats(
                 .map(|_| {
                     out.iter_mut().for_each(|v| *v = Vec3::ZERO);
                     unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
-                    accumulate_j_from(
-                        &prepared.volume,
-                        &prepared.lights,
+                    Walks::guided(&prepared.volume, &prepared.lights, gate).accumulate_j_from(
                         light.position,
                         n,
-                        &gate,
                         1,
                         &mut rng,
                         &mut out,

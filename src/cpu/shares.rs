@@ -20,7 +20,7 @@ use glam::Vec3;
 
 use crate::physics::internal::chances::collision_probability;
 
-use crate::physics::internal::clock::{march_clock, Clock, ClockMarch};
+use crate::physics::internal::clock::{march_clock, Clock, ClockMarch, ClockRay};
 use crate::physics::internal::sources::InternalLights;
 use crate::physics::phase;
 use crate::physics::sh::{sh_basis, MAX_COUNT};
@@ -56,17 +56,14 @@ pub fn light_shares<D: DensityField>(
     let x = eye + dir * t_in;
     let len = t_out - t_in;
     let clock = cache.params.clock;
-    let window = match march_clock(
-        vol,
+    let ray = ClockRay {
         clock,
-        cache.s_star,
-        x,
+        s_star: cache.s_star,
+        origin: x,
         dir,
-        0.0,
-        len,
-        len,
-        cache.s_star,
-    ) {
+        t_exit: len,
+    };
+    let window = match march_clock(vol, &ray, 0.0, len, cache.s_star) {
         ClockMarch::Reached(t) => t,
         ClockMarch::Exhausted(_) => len,
     };

@@ -45,19 +45,18 @@ pub fn sample_tentative(
     rng: &mut Rng,
     event: impl FnMut(f32, f32, &mut Rng) -> bool,
 ) -> bool {
-    sample_tentative_at_rate(grid, origin, dir, t0, t1, 1.0, rng, event)
+    sample_tentative_at_rate(grid, origin, dir, (t0, t1), 1.0, rng, event)
 }
 
-/// [`sample_tentative`] with the rate `rate` times the local majorant
-/// (`rate ≥ 1`): `event` receives that rate as its majorant.
+/// [`sample_tentative`] over the interval `(t0, t1)` with the rate `rate`
+/// times the local majorant (`rate ≥ 1`): `event` receives that rate as
+/// its majorant.
 #[inline]
-#[allow(clippy::too_many_arguments)] // a ray, its interval, the rate and the callback
 pub fn sample_tentative_at_rate(
     grid: &MajorantGrid,
     origin: Vec3,
     dir: Vec3,
-    t0: f32,
-    t1: f32,
+    (t0, t1): (f32, f32),
     rate: f32,
     rng: &mut Rng,
     mut event: impl FnMut(f32, f32, &mut Rng) -> bool,
@@ -281,8 +280,7 @@ pub fn transmittance_at_rate<D: DensityField>(
         &vol.majorants,
         origin,
         dir,
-        t0,
-        t1,
+        (t0, t1),
         rate,
         rng,
         |t, m, rng| {

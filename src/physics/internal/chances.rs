@@ -6,7 +6,7 @@
 
 use glam::Vec3;
 
-use super::clock::{march_clock, Clock, ClockMarch};
+use super::clock::{march_clock, Clock, ClockMarch, ClockRay};
 use crate::physics::volume::{DensityField, Volume};
 
 /// The chance that light travelling from `p` along `d` collides before it
@@ -87,17 +87,14 @@ impl ChancesAlongRay {
         } else {
             (self.t_exit, COLLISION_DEPTH)
         };
-        match march_clock(
-            vol,
-            Clock::OpticalDepth,
-            self.s_star,
-            self.origin,
-            self.dir,
-            t,
-            self.t_exit,
-            t_stop,
-            budget,
-        ) {
+        let ray = ClockRay {
+            clock: Clock::OpticalDepth,
+            s_star: self.s_star,
+            origin: self.origin,
+            dir: self.dir,
+            t_exit: self.t_exit,
+        };
+        match march_clock(vol, &ray, t, t_stop, budget) {
             ClockMarch::Reached(_) => {
                 self.saturated = true;
                 return 1.0;

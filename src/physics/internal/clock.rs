@@ -12,7 +12,7 @@
 //! `dℓ = dτ / c_g` gives `L = ∫ dτ E[W(τ) (S₁/c_g)(y(τ))]`, so in τ-time the
 //! series is `J^τ_k(z, n) = E[W(kτ*) (S₁/c_g)(z_k, n_k)]`. So that a final
 //! gather integrates either clock over geometric distance,
-//! `L₀ = ∫_{window} dt T(x, y_t) Ĵ(y_t)`, [`accumulate_j`](super::walk::accumulate_j) returns
+//! `L₀ = ∫_{window} dt T(x, y_t) Ĵ(y_t)`, [`accumulate_j`](super::walk::Walks::accumulate_j) returns
 //! `Ĵ_k = c_g(z) J^τ_k = ρ(z) · W · α σ_t (S₁/b)(z_k, n_k)`, which is
 //! `S₁(z, n)` for `k = 0` exactly as with the geometric clock, and zero in
 //! empty space (in τ-time light crosses empty space instantly). The
@@ -159,17 +159,15 @@ impl<'v, D: DensityField> ClockLattice<'v, D> {
         }
     }
 
-    /// Adds the clock over `[from, to]` of the cell `[a, b]` (majorant `m`) to `acc`,
+    /// Adds the clock over `[from, to]` of the cell `(a, b, m)` (the stretch
+    /// `[a, b]` of the ray, majorant `m`) to `acc`,
     /// `from` being where the previous stretch in the cell ended (or
     /// anywhere, in a new cell); returns where `acc` reaches `budget`, if it
     /// does (`acc` is then left short of it).
     #[inline]
-    #[allow(clippy::too_many_arguments)] // one cell, one stretch, the clock and its budget
     pub(super) fn advance(
         &mut self,
-        a: f32,
-        b: f32,
-        m: f32,
+        (a, b, m): (f32, f32, f32),
         from: f32,
         to: f32,
         acc: &mut f32,
@@ -210,6 +208,24 @@ impl<'v, D: DensityField> ClockLattice<'v, D> {
     }
 }
 
+/// A ray the clock is marched along: `origin + t dir` from `t = 0` up to
+/// `t_exit`, where it leaves the medium's box, with the clock and the
+/// window `s_star` (which fixes the optical-depth clock's quadrature
+/// lattice).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClockRay {
+    /// What the clock counts.
+    pub clock: Clock,
+    /// The window `s*`.
+    pub s_star: f32,
+    /// The ray's origin (inside or on the medium's box).
+    pub origin: Vec3,
+    /// Its unit direction.
+    pub dir: Vec3,
+    /// Where it leaves the box.
+    pub t_exit: f32,
+}
+
 /// Where a clock budget runs out along a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ClockMarch {
@@ -219,44 +235,43 @@ pub enum ClockMarch {
     Exhausted(f32),
 }
 
-/// Advances `clock` (gating windows of `s_star`) along `origin + t dir`
-/// from `t0` (inside or on the medium's box) towards `t_stop ≤ t_exit`,
-/// where `t_exit` is where the ray leaves the box. Returns where the clock
-/// has advanced by `budget`, or how far it advanced by `t_stop`. For the
-/// optical-depth clock the quadrature lattice depends on `s_star`,
-/// `origin`, `dir`, `t0` and `t_exit` only, so calls that differ in
-/// `t_stop` or `budget` measure the same clock.
-#[allow(clippy::too_many_arguments)] // one ray, its clipped span and its budget
+/// Advances the clock along `ray` from `t0` (inside or on the medium's
+/// box) towards `t_stop ≤ ray.t_exit`. Returns where the clock has
+/// advanced by `budget`, or how far it advanced by `t_stop`. For the
+/// optical-depth clock the quadrature lattice depends on the ray and `t0`
+/// only, so calls that differ in `t_stop` or `budget` measure the same
+/// clock.
 pub fn march_clock<D: DensityField>(
     vol: &Volume<D>,
-    clock: Clock,
-    s_star: f32,
-    origin: Vec3,
-    dir: Vec3,
+    ray: &ClockRay,
     t0: f32,
-    t_exit: f32,
     t_stop: f32,
     budget: f32,
 ) -> ClockMarch {
-    march_clock_rate(vol, clock, s_star, origin, dir, t0, t_exit, t_stop, budget).0
+    march_clock_rate(vol, ray, t0, t_stop, budget).0
 }
 
-/// The optical-depth clock's midpoint lattice along `origin + t dir` from
-/// `t0` to `t_exit`: in each majorant cell `[a, b]` the ray crosses, steps
+/// The optical-depth clock's midpoint lattice along `ray` from `t0` to
+/// its exit: in each majorant cell `[a, b]` the ray crosses, steps
 /// `[a + i h, a + (i+1) h)` cut at `b` ([`clock_step`]), each passed to
 /// `step(p0, p1, c)` with `c` the grey extinction at its midpoint; a cell
 /// whose majorant is zero is one step of rate zero. Stops when `step`
-/// returns false. What [`march_clock_rate`] and [`clock_at_each`] count.
+/// returns false. What [`march_clock_rate`] and [`clock_at_each`] count
+/// (whatever `ray.clock` says).
 #[inline]
 fn clock_steps<D: DensityField>(
     vol: &Volume<D>,
-    s_star: f32,
-    origin: Vec3,
-    dir: Vec3,
+    ray: &ClockRay,
     t0: f32,
-    t_exit: f32,
     mut step: impl FnMut(f32, f32, f32) -> bool,
 ) {
+    let &ClockRay {
+        s_star,
+        origin,
+        dir,
+        t_exit,
+        ..
+    } = ray;
     let cell = clock_cell(vol);
     let sigma_g = vol.optics.sigma_t.max_element();
     vol.majorants.walk(origin, dir, t0, t_exit, |a, b, m| {
@@ -286,20 +301,15 @@ fn clock_steps<D: DensityField>(
 /// for the geometric clock; zero when the budget is not reached or is not
 /// positive): the density of the points that a budget drawn uniformly
 /// puts along the ray, per unit of the budget's range.
-#[allow(clippy::too_many_arguments)] // march_clock's
 pub fn march_clock_rate<D: DensityField>(
     vol: &Volume<D>,
-    clock: Clock,
-    s_star: f32,
-    origin: Vec3,
-    dir: Vec3,
+    ray: &ClockRay,
     t0: f32,
-    t_exit: f32,
     t_stop: f32,
     budget: f32,
 ) -> (ClockMarch, f32) {
-    let t_stop = t_stop.min(t_exit);
-    if clock == Clock::Geometric {
+    let t_stop = t_stop.min(ray.t_exit);
+    if ray.clock == Clock::Geometric {
         let span = (t_stop - t0).max(0.0);
         return if span >= budget {
             (ClockMarch::Reached(t0 + budget.max(0.0)), 1.0)
@@ -312,7 +322,7 @@ pub fn march_clock_rate<D: DensityField>(
     }
     let mut acc = 0.0f32;
     let mut result = None;
-    clock_steps(vol, s_star, origin, dir, t0, t_exit, |p0, p1, c| {
+    clock_steps(vol, ray, t0, |p0, p1, c| {
         if p0 >= t_stop {
             return false;
         }
@@ -328,36 +338,31 @@ pub fn march_clock_rate<D: DensityField>(
     result.unwrap_or((ClockMarch::Exhausted(acc), 0.0))
 }
 
-/// The clock from `origin` to each of the points `origin + ts[j] dir`
-/// (`ts` ascending, within `[0, t_exit]`, `t_exit` where the ray leaves
-/// the box) in one march: `out[j]` is what `march_clock` from `origin`
-/// with `t0 = 0`, `t_stop = ts[j]` and an unlimited budget returns (the
-/// same lattice, anchored at `origin`; equal up to rounding). The final
-/// gather's points need their clock from the window's start for `L₁`'s
-/// budget: one march for all of them instead of one each (stretches
-/// between the points, each on its own lattice, had shifted the budgets
-/// with the number of points: +2 % in `L₁` at 32 points on the puffs).
-#[allow(clippy::too_many_arguments)] // the ray, its points and the output
+/// The clock from the ray's origin to each of the points
+/// `origin + ts[j] dir` (`ts` ascending, within `[0, t_exit]`) in one
+/// march: `out[j]` is what `march_clock` with `t0 = 0`, `t_stop = ts[j]`
+/// and an unlimited budget returns (the same lattice, anchored at the
+/// origin; equal up to rounding). The final gather's points need their
+/// clock from the window's start for `L₁`'s budget: one march for all of
+/// them instead of one each (stretches between the points, each on its
+/// own lattice, had shifted the budgets with the number of points: +2 %
+/// in `L₁` at 32 points on the puffs).
 pub fn clock_at_each<D: DensityField>(
     vol: &Volume<D>,
-    clock: Clock,
-    s_star: f32,
-    origin: Vec3,
-    dir: Vec3,
-    t_exit: f32,
+    ray: &ClockRay,
     ts: &[f32],
     out: &mut [f32],
 ) {
     let n = ts.len().min(out.len());
-    if clock == Clock::Geometric {
+    if ray.clock == Clock::Geometric {
         for (o, &t) in out[..n].iter_mut().zip(ts) {
-            *o = t.clamp(0.0, t_exit.max(0.0));
+            *o = t.clamp(0.0, ray.t_exit.max(0.0));
         }
         return;
     }
     let mut acc = 0.0f32;
     let mut k = 0usize;
-    clock_steps(vol, s_star, origin, dir, 0.0, t_exit, |p0, p1, c| {
+    clock_steps(vol, ray, 0.0, |p0, p1, c| {
         while k < n && ts[k] <= p1 {
             out[k] = acc + c * (ts[k] - p0).max(0.0);
             k += 1;
@@ -370,30 +375,13 @@ pub fn clock_at_each<D: DensityField>(
     }
 }
 
-/// The clock's advance along the ray from `origin` (inside or on the box)
-/// over `[0, t]`, `t` clamped to `[0, t_exit]`: one [`march_clock`] with an
-/// unlimited budget (what [`clock_at_each`] gives at each of many points).
+/// The clock's advance along the ray from its origin (inside or on the
+/// box) over `[0, t]`, `t` clamped to `[0, t_exit]`: one [`march_clock`]
+/// with an unlimited budget (what [`clock_at_each`] gives at each of many
+/// points).
 #[inline]
-pub fn clock_to<D: DensityField>(
-    vol: &Volume<D>,
-    clock: Clock,
-    s_star: f32,
-    origin: Vec3,
-    dir: Vec3,
-    t: f32,
-    t_exit: f32,
-) -> f32 {
-    match march_clock(
-        vol,
-        clock,
-        s_star,
-        origin,
-        dir,
-        0.0,
-        t_exit,
-        t,
-        f32::INFINITY,
-    ) {
+pub fn clock_to<D: DensityField>(vol: &Volume<D>, ray: &ClockRay, t: f32) -> f32 {
+    match march_clock(vol, ray, 0.0, t, f32::INFINITY) {
         ClockMarch::Exhausted(d) => d,
         ClockMarch::Reached(_) => f32::INFINITY,
     }
@@ -420,9 +408,16 @@ mod tests {
         ts.sort_by(f32::total_cmp);
         for clock in [Clock::OpticalDepth, Clock::Geometric] {
             let mut out = vec![f32::NAN; ts.len()];
-            clock_at_each(&vol, clock, 0.25, origin, dir, t_exit, &ts, &mut out);
+            let ray = ClockRay {
+                clock,
+                s_star: 0.25,
+                origin,
+                dir,
+                t_exit,
+            };
+            clock_at_each(&vol, &ray, &ts, &mut out);
             for (&t, &got) in ts.iter().zip(&out) {
-                let want = clock_to(&vol, clock, 0.25, origin, dir, t, t_exit);
+                let want = clock_to(&vol, &ray, t);
                 assert!(
                     (got - want).abs() <= 1e-4 * want.max(1e-3),
                     "{clock:?}, t {t}: one march {got}, march to the point {want}"

@@ -64,7 +64,9 @@ use glam::Vec3;
 
 use super::chances::ChancesAlongRay;
 
-use super::clock::{clock_at_each, clock_to, march_clock, march_clock_rate, Clock, ClockMarch};
+use super::clock::{
+    clock_at_each, clock_to, march_clock, march_clock_rate, Clock, ClockMarch, ClockRay,
+};
 use super::segment_pdf::SegmentPdf;
 use super::sources::{InternalLights, L1Form, Part};
 use crate::physics::lights::Lights;
@@ -120,18 +122,23 @@ impl GatherSample {
 /// over `[window, end]`, marched here at `samples` stratified points (the
 /// walks keep this part out of what `L₀` reconstructs: see
 /// [`Part::Scattered`]).
-#[allow(clippy::too_many_arguments)] // the ray, its window and the cache
+/// `ray` is the camera ray from where it enters the box, `window` where
+/// its window ends.
 fn single_beyond_window<D: DensityField>(
     vol: &Volume<D>,
     lights: &Lights,
     cache: &InternalLights,
-    x: Vec3,
-    dir: Vec3,
+    ray: &ClockRay,
     window: f32,
-    len: f32,
     samples: u32,
     rng: &mut Rng,
 ) -> Vec3 {
+    let &ClockRay {
+        origin: x,
+        dir,
+        t_exit: len,
+        ..
+    } = ray;
     let terms = cache.params.terms;
     if terms == 0 || window >= len {
         return Vec3::ZERO;
@@ -139,17 +146,7 @@ fn single_beyond_window<D: DensityField>(
     // The clock is at `s*` at the window's end: march on from there (not
     // again from `x`) for the remaining `N s*`.
     let budget = cache.s_star * terms as f32;
-    let end = match march_clock(
-        vol,
-        cache.params.clock,
-        cache.s_star,
-        x,
-        dir,
-        window,
-        len,
-        len,
-        budget,
-    ) {
+    let end = match march_clock(vol, ray, window, len, budget) {
         ClockMarch::Reached(t) => t,
         ClockMarch::Exhausted(_) => len,
     };
@@ -229,8 +226,15 @@ pub fn gather<D: DensityField>(
     }
     let s_star = cache.s_star;
     let clock = cache.params.clock;
+    let ray = ClockRay {
+        clock,
+        s_star,
+        origin: x,
+        dir,
+        t_exit: len,
+    };
     // The window's end along the ray.
-    let window = match march_clock(vol, clock, s_star, x, dir, 0.0, len, len, s_star) {
+    let window = match march_clock(vol, &ray, 0.0, len, s_star) {
         ClockMarch::Reached(t) => t,
         ClockMarch::Exhausted(_) => len,
     };
@@ -256,16 +260,7 @@ pub fn gather<D: DensityField>(
     }
     let mut clocks = [0.0f32; MAX_GATHER_POINTS];
     if field {
-        clock_at_each(
-            vol,
-            clock,
-            s_star,
-            x,
-            dir,
-            len,
-            &ts[..n_points],
-            &mut clocks,
-        );
+        clock_at_each(vol, &ray, &ts[..n_points], &mut clocks);
     }
     // The strata are visited from the window's far end back, so that the
     // collided part's chances of a collision share one march
@@ -288,8 +283,12 @@ pub fn gather<D: DensityField>(
                 * rho
                 * single_scatter_source_at_rate(vol, lights, y, n, TRACKING_RATE, rng);
             let l1 = if field {
-                let budget = s_star - clocks[j];
-                field_l1_at(vol, lights, cache, n, budget, y, rho, rng)
+                let at = WindowPoint {
+                    position: y,
+                    density: rho,
+                    towards: n,
+                };
+                field_l1_at(vol, lights, cache, &at, s_star - clocks[j], rng)
             } else {
                 Vec3::ZERO
             };
@@ -305,7 +304,7 @@ pub fn gather<D: DensityField>(
         out.internal += tr * l1 * step;
         out.single += tr * s1 * step;
     }
-    out.single += single_beyond_window(vol, lights, cache, x, dir, window, len, samples, rng);
+    out.single += single_beyond_window(vol, lights, cache, &ray, window, samples, rng);
     if field {
         return out;
     }
@@ -392,14 +391,20 @@ pub fn gather<D: DensityField>(
         let within = match clock {
             Clock::Geometric => t + r <= s_star,
             Clock::OpticalDepth => {
-                let a = clock_to(vol, clock, s_star, x, dir, t, len);
+                let a = clock_to(vol, &ray, t);
                 if a > s_star {
                     false
                 } else {
                     let back = -n_light;
                     match vol.clip(y, back) {
                         Some((_, exit)) => {
-                            a + clock_to(vol, clock, s_star, y, back, r.min(exit), exit) <= s_star
+                            let to_light = ClockRay {
+                                origin: y,
+                                dir: back,
+                                t_exit: exit,
+                                ..ray
+                            };
+                            a + clock_to(vol, &to_light, r.min(exit)) <= s_star
                         }
                         None => true,
                     }
@@ -427,7 +432,15 @@ pub fn gather<D: DensityField>(
     out
 }
 
-/// `L₁`'s integrand at the camera-ray point `y = x + t dir` (without
+/// A point `y` of a camera ray's window: its position, the density there
+/// and the direction `n` light leaves it in towards the camera.
+struct WindowPoint {
+    position: Vec3,
+    density: f32,
+    towards: Vec3,
+}
+
+/// `L₁`'s integrand at the camera-ray point `at`, `y = x + t dir` (without
 /// `T(x, y)`; `budget`: `s*` less the clock from `x` to `y`), one
 /// sample: `b(y) ∫ dn' P(n·n') ∫ dr T(y, x') Ĵ(x', n')` over the window,
 /// with `x' = y − r n'`, `n'` drawn from the phase function and `r` within
@@ -439,15 +452,12 @@ pub fn gather<D: DensityField>(
 /// `x''` at most `s*` (the next terms of the expansion of `G(s)` inside
 /// the window by number of scatterings, [method §6](crate::doc::method)'s `G ≈ G_SS` being
 /// its first two).
-#[allow(clippy::too_many_arguments)]
 fn field_l1_at<D: DensityField>(
     vol: &Volume<D>,
     lights: &Lights,
     cache: &InternalLights,
-    n: Vec3,
+    at: &WindowPoint,
     budget: f32,
-    y: Vec3,
-    rho_y: f32,
     rng: &mut Rng,
 ) -> Vec3 {
     let clock = cache.params.clock;
@@ -455,7 +465,7 @@ fn field_l1_at<D: DensityField>(
     let scatters = cache.params.window_scatters.max(1);
     // The scattering point, its density and the direction light leaves it
     // in; the product of `b T / pdf(r)` of the steps so far.
-    let (mut point, mut rho_point, mut towards) = (y, rho_y, n);
+    let (mut point, mut rho_point, mut towards) = (at.position, at.density, at.towards);
     let mut throughput = Vec3::ONE;
     let mut sum = Vec3::ZERO;
     for scattering in 1..=scatters {
@@ -482,7 +492,14 @@ fn field_l1_at<D: DensityField>(
             }
             Clock::OpticalDepth => {
                 let c = rng.next_f32() * budget;
-                match march_clock_rate(vol, clock, cache.s_star, point, back, 0.0, exit, exit, c) {
+                let ray = ClockRay {
+                    clock,
+                    s_star: cache.s_star,
+                    origin: point,
+                    dir: back,
+                    t_exit: exit,
+                };
+                match march_clock_rate(vol, &ray, 0.0, exit, c) {
                     (ClockMarch::Reached(r), rate) if rate > 0.0 => (r, budget / rate, c),
                     _ => break,
                 }

@@ -4,7 +4,7 @@
 //! ([method §4](crate::doc::method); a choice beyond the note).
 //!
 //!
-//! The internal lights' walks ([`accumulate_j_from`](super::walk::accumulate_j_from)) draw their direction
+//! The internal lights' walks ([`accumulate_j_from`](super::walk::Walks::accumulate_j_from)) draw their direction
 //! after a collision from a mixture: the phase function, or with
 //! probability [`GUIDE_PROBABILITY`] a lobe about the direction towards an
 //! external light, and multiply the weight by the phase function over the
@@ -119,6 +119,7 @@ pub fn guided_direction(
 mod tests {
     use super::*;
     use crate::physics::internal::testing::*;
+    use crate::physics::internal::walk::Walks;
 
     /// Guiding the walks towards the light changes their spread, not their
     /// mean: in a bounded, forward-scattering, heterogeneous medium lit by
@@ -137,7 +138,11 @@ mod tests {
             .into_iter()
             .map(|guided| {
                 mean_and_its_variance(400_000, 21, u32::from(guided), |rng| {
-                    split_walk(&vol, &lights, &settings, z, n, guided, rng).0
+                    let walks = Walks {
+                        guided,
+                        ..Walks::guided(&vol, &lights, settings)
+                    };
+                    split_walk(&walks, z, n, rng).0
                 })
             })
             .collect();

@@ -41,7 +41,7 @@
 //! `view_walks` `K_v > 0` each light also runs `K_v` walks from `x_i` along
 //! `−n_i` and keeps the mean of their collided part per unit chance
 //! ([`Part::Scattered`]) as one RGB value (walked by
-//! [`accumulate_collided`], which skips the shadow rays of the gates
+//! [`Walks::accumulate_collided`], which skips the shadow rays of the gates
 //! before a walk's first collision: 7 % of a light set's time on the
 //! puffs, the estimator unchanged); `L₀`'s reconstruction averages
 //! those ([`InternalLights::reconstruct_view`]). Evaluating an order-`L`
@@ -80,12 +80,12 @@ use rayon::prelude::*;
 
 use super::chances::{collided_per_unit_chance, collision_probability};
 
-use super::clock::{march_clock, Clock, ClockMarch, GateSettings};
+use super::clock::{march_clock, Clock, ClockMarch, ClockRay, GateSettings};
 
 use super::light_index::LightGrid;
 use super::placement::{place_lights_with, PlacementDensity};
 use super::view_placement::{knn_kernel_radius, place_in_view, ViewFrame};
-use super::walk::{accumulate_collided, accumulate_j_from};
+use super::walk::Walks;
 use crate::physics::lights::Lights;
 use crate::physics::phase;
 use crate::physics::reference::RR_START_DEPTH;
@@ -477,12 +477,14 @@ pub fn within_view_reach<D: DensityField>(
                 || matches!(
                     march_clock(
                         vol,
-                        params.clock,
-                        params.s_star,
-                        params.eye + dir * t_in,
-                        dir,
+                        &ClockRay {
+                            clock: params.clock,
+                            s_star: params.s_star,
+                            origin: params.eye + dir * t_in,
+                            dir,
+                            t_exit: t_out - t_in,
+                        },
                         0.0,
-                        t_out - t_in,
                         t_stop - t_in,
                         params.s_star,
                     ),
@@ -670,6 +672,7 @@ impl InternalLights {
             clock: params.clock,
             rr_start: RR_START_DEPTH,
         };
+        let walker = Walks::guided(vol, external, gate);
         let walks = params.walks.max(1);
         let tr_estimates = (walks / 4).clamp(4, 64);
         // The lights whose view walks the camera can read.
@@ -727,17 +730,7 @@ impl InternalLights {
                     |n: Vec3, rng: &mut Rng, per_walk: &mut [Vec3], unscattered: &mut [Vec3]| {
                         per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
                         unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
-                        accumulate_j_from(
-                            vol,
-                            external,
-                            x,
-                            n,
-                            &gate,
-                            1,
-                            rng,
-                            per_walk,
-                            Some(unscattered),
-                        );
+                        walker.accumulate_j_from(x, n, 1, rng, per_walk, Some(unscattered));
                     };
                 // Stratified directions: a spherical Fibonacci lattice of
                 // `walks` points under a uniformly random rotation (each
@@ -776,7 +769,7 @@ impl InternalLights {
                     // All walks share `x` and `n`, so the chance of a
                     // collision divides their sum once.
                     for _ in 0..params.view_walks {
-                        view += accumulate_collided(vol, external, x, n, &gate, &mut rng);
+                        view += walker.accumulate_collided(x, n, &mut rng);
                     }
                     if view != Vec3::ZERO {
                         view /= params.view_walks as f32

@@ -7,7 +7,7 @@ use glam::Vec3;
 use super::chances::collided;
 use super::clock::{Clock, GateSettings};
 use super::sources::{InternalLight, InternalLights, InternalParams, L1Form, LightSources};
-use super::walk::accumulate_j_guided;
+use super::walk::Walks;
 use crate::physics::lights::Lights;
 use crate::physics::rng::Rng;
 use crate::physics::sh::sh_count;
@@ -19,6 +19,7 @@ pub(crate) struct Field {
     base: f32,
     amp: f32,
 }
+
 impl DensityField for Field {
     fn density(&self, p: Vec3) -> f32 {
         self.base + self.amp * (p.x.sin() * p.y.sin())
@@ -115,30 +116,11 @@ pub(crate) fn forward_scattering_walk() -> (Volume<Field>, Lights, GateSettings,
 }
 
 /// One walk's collided part of its terms `k ≥ 1` ([`collided`]) and
-/// the part before its first collision, by [`accumulate_j_guided`].
-pub(crate) fn split_walk(
-    vol: &Volume<Field>,
-    lights: &Lights,
-    settings: &GateSettings,
-    z: Vec3,
-    n: Vec3,
-    guided: bool,
-    rng: &mut Rng,
-) -> (Vec3, Vec3) {
-    let mut out = vec![Vec3::ZERO; settings.gate_count()];
-    let mut unscattered = vec![Vec3::ZERO; settings.gate_count()];
-    accumulate_j_guided(
-        vol,
-        lights,
-        z,
-        n,
-        settings,
-        1,
-        guided,
-        rng,
-        &mut out,
-        Some(&mut unscattered),
-    );
+/// the part before its first collision, by [`Walks::accumulate_j_from`].
+pub(crate) fn split_walk(walks: &Walks<Field>, z: Vec3, n: Vec3, rng: &mut Rng) -> (Vec3, Vec3) {
+    let mut out = vec![Vec3::ZERO; walks.gates.gate_count()];
+    let mut unscattered = vec![Vec3::ZERO; walks.gates.gate_count()];
+    walks.accumulate_j_from(z, n, 1, rng, &mut out, Some(&mut unscattered));
     (
         collided(&out, &unscattered),
         unscattered[1..].iter().sum::<Vec3>(),

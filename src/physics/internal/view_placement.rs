@@ -32,7 +32,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::clock::{march_clock, Clock, ClockMarch};
+use super::clock::{march_clock, Clock, ClockMarch, ClockRay};
 use crate::physics::rng::Rng;
 use crate::physics::volume::{DensityField, Volume};
 
@@ -99,9 +99,14 @@ pub fn place_in_view<D: DensityField>(
                 };
                 let origin = frame.eye + dir * t_in;
                 let span = t_out - t_in;
-                if let ClockMarch::Reached(t) =
-                    march_clock(vol, clock, s_star, origin, dir, 0.0, span, span, budget)
-                {
+                let ray = ClockRay {
+                    clock,
+                    s_star,
+                    origin,
+                    dir,
+                    t_exit: span,
+                };
+                if let ClockMarch::Reached(t) = march_clock(vol, &ray, 0.0, span, budget) {
                     return Some(origin + dir * t);
                 }
             }

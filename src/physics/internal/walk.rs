@@ -36,7 +36,7 @@
 
 use glam::Vec3;
 
-use super::clock::{march_clock, Clock, ClockLattice, ClockMarch, GateSettings};
+use super::clock::{march_clock, Clock, ClockLattice, ClockMarch, ClockRay, GateSettings};
 use super::guiding::{guided_direction, GUIDED_COLLISIONS};
 use crate::physics::lights::Lights;
 use crate::physics::phase;
@@ -51,7 +51,8 @@ use crate::physics::volume::{DensityField, Volume};
 /// `n_k` the direction light travels there, `weight` the walk's RGB weight
 /// (so that `E[weight · f(z_k, n_k)] = G(k s*) f (z, n)`). Gate 0 fires at
 /// `z` with weight 1. The walk ends after gate `N`, on leaving the medium's
-/// box, by Russian roulette, or when its weight vanishes.
+/// box, by Russian roulette, or when its weight vanishes. Its directions
+/// come from the phase function alone.
 pub fn gated_walk<D: DensityField>(
     vol: &Volume<D>,
     z: Vec3,
@@ -60,210 +61,161 @@ pub fn gated_walk<D: DensityField>(
     rng: &mut Rng,
     mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3),
 ) {
-    walk(
+    let no_lights = Lights::default();
+    let walks = Walks {
         vol,
-        z,
-        n,
-        settings,
-        None,
-        rng,
-        |k, w, p, dir, _, _| on_gate(k, w, p, dir),
-        None,
-    );
-}
-
-/// Adds one walk's estimate of `Ĵ_k(z, n)`, `k = 0..out.len()−1` (at most
-/// `N`), to `out`: with the geometric clock `Ĵ_k = J_k = G(k s*) S₁`, each
-/// gate adding `weight · b(z_k) · (S₁/b)(z_k, n_k)`; with the optical-depth
-/// clock `Ĵ_k = c_g(z) J^τ_k`, each gate adding
-/// `weight · ρ(z) · α σ_t · (S₁/b)(z_k, n_k)` (see the module doc). `out[1]`
-/// is the note's internal light source `F`.
-pub fn accumulate_j<D: DensityField>(
-    vol: &Volume<D>,
-    lights: &Lights,
-    z: Vec3,
-    n: Vec3,
-    settings: &GateSettings,
-    rng: &mut Rng,
-    out: &mut [Vec3],
-) {
-    accumulate_j_from(vol, lights, z, n, settings, 0, rng, out, None);
-}
-
-/// [`accumulate_j`] for the terms `k ≥ first` only (the others are left
-/// untouched and cost no shadow rays): the internal lights evaluate the
-/// `k = 0` term, `S₁` itself, exactly and need the walk only for `k ≥ 1`.
-/// With `unscattered`, also adds to it the part of each term that the walk
-/// carried to its gate without a real collision: the single scatter
-/// `T S₁` from `k s*` further along `−n`, which the final gather marches
-/// exactly (the single scatter beyond the window) instead of reading it
-/// back from the lights' spherical harmonics. The walk's directions after
-/// collisions are guided towards the external lights
-/// ([`guided_direction`]).
-#[allow(clippy::too_many_arguments)] // accumulate_j's, `first` and one more output
-pub fn accumulate_j_from<D: DensityField>(
-    vol: &Volume<D>,
-    lights: &Lights,
-    z: Vec3,
-    n: Vec3,
-    settings: &GateSettings,
-    first: u32,
-    rng: &mut Rng,
-    out: &mut [Vec3],
-    unscattered: Option<&mut [Vec3]>,
-) {
-    accumulate_j_guided(
-        vol,
-        lights,
-        z,
-        n,
-        settings,
-        first,
-        true,
-        rng,
-        out,
-        unscattered,
-    );
-}
-
-/// [`accumulate_j_from`], with the directions after collisions guided
-/// towards the lights or (`guided` false) from the phase function alone.
-#[allow(clippy::too_many_arguments)] // accumulate_j_from's and the switch
-pub fn accumulate_j_guided<D: DensityField>(
-    vol: &Volume<D>,
-    lights: &Lights,
-    z: Vec3,
-    n: Vec3,
-    settings: &GateSettings,
-    first: u32,
-    guided: bool,
-    rng: &mut Rng,
-    out: &mut [Vec3],
-    mut unscattered: Option<&mut [Vec3]>,
-) {
-    let gates = match &unscattered {
-        Some(u) => out.len().min(u.len()),
-        None => out.len(),
-    }
-    .min(settings.gate_count());
-    if gates == 0 {
-        return;
-    }
-    let limited = GateSettings {
-        n_terms: (gates - 1) as u32,
-        ..*settings
+        lights: &no_lights,
+        gates: *settings,
+        guided: false,
     };
-    gate_sources(
-        vol,
-        lights,
-        z,
-        n,
-        &limited,
-        first,
-        guided,
-        false,
-        rng,
-        |k, v, scattered| {
+    walks.walk(z, n, rng, |k, w, p, dir, _, _| on_gate(k, w, p, dir), None);
+}
+
+/// What the walks of one light set share: the medium, the external lights
+/// whose single scatter `S₁` the gates read, the gates, and whether a
+/// walk's directions after its first collisions are guided towards those
+/// lights ([`guided_direction`]) or come from the phase function alone
+/// (both unbiased; the internal lights guide them).
+#[derive(Clone, Copy)]
+pub struct Walks<'a, D> {
+    /// The medium.
+    pub vol: &'a Volume<D>,
+    /// The external lights.
+    pub lights: &'a Lights,
+    /// The window, the series truncation and the clock.
+    pub gates: GateSettings,
+    /// Whether directions after a collision are guided.
+    pub guided: bool,
+}
+
+impl<'a, D: DensityField> Walks<'a, D> {
+    /// Guided walks in `vol` under `lights`, gated by `gates`: what the
+    /// internal lights run.
+    pub fn guided(vol: &'a Volume<D>, lights: &'a Lights, gates: GateSettings) -> Self {
+        Self {
+            vol,
+            lights,
+            gates,
+            guided: true,
+        }
+    }
+
+    /// Adds one walk's estimate of `Ĵ_k(z, n)`, `k = 0..out.len()−1` (at
+    /// most `N`), to `out`: with the geometric clock
+    /// `Ĵ_k = J_k = G(k s*) S₁`, each gate adding
+    /// `weight · b(z_k) · (S₁/b)(z_k, n_k)`; with the optical-depth clock
+    /// `Ĵ_k = c_g(z) J^τ_k`, each gate adding
+    /// `weight · ρ(z) · α σ_t · (S₁/b)(z_k, n_k)` (see the module doc).
+    /// `out[1]` is the note's internal light source `F`.
+    pub fn accumulate_j(&self, z: Vec3, n: Vec3, rng: &mut Rng, out: &mut [Vec3]) {
+        self.accumulate_j_from(z, n, 0, rng, out, None);
+    }
+
+    /// [`Walks::accumulate_j`] for the terms `k ≥ first` only (the others
+    /// are left untouched and cost no shadow rays): the internal lights
+    /// evaluate the `k = 0` term, `S₁` itself, exactly and need the walk
+    /// only for `k ≥ 1`. With `unscattered`, also adds to it the part of
+    /// each term that the walk carried to its gate without a real
+    /// collision: the single scatter `T S₁` from `k s*` further along
+    /// `−n`, which the final gather marches exactly (the single scatter
+    /// beyond the window) instead of reading it back from the lights'
+    /// spherical harmonics.
+    pub fn accumulate_j_from(
+        &self,
+        z: Vec3,
+        n: Vec3,
+        first: u32,
+        rng: &mut Rng,
+        out: &mut [Vec3],
+        mut unscattered: Option<&mut [Vec3]>,
+    ) {
+        let gates = match &unscattered {
+            Some(u) => out.len().min(u.len()),
+            None => out.len(),
+        }
+        .min(self.gates.gate_count());
+        if gates == 0 {
+            return;
+        }
+        let limited = Walks {
+            gates: GateSettings {
+                n_terms: (gates - 1) as u32,
+                ..self.gates
+            },
+            ..*self
+        };
+        limited.gate_sources(z, n, first, false, rng, |k, v, scattered| {
             out[k as usize] += v;
             if let (false, Some(u)) = (scattered, unscattered.as_deref_mut()) {
                 u[k as usize] += v;
             }
-        },
-    );
-}
-
-/// What one guided walk from `z` carried to its gates `k = 1..=N` through
-/// a collision: [`collided`](super::chances::collided) of [`accumulate_j_from`]'s two outputs (the
-/// same estimator), without the shadow rays of the gates it passes before
-/// its first collision, whose share that difference removes again. The
-/// walks towards the eye need nothing else: on the puffs at `s* = 0.25`,
-/// 128 of them per light within reach, a light set took 1.74 s with
-/// every gate's shadow ray and 1.61 s with these (three runs each).
-pub fn accumulate_collided<D: DensityField>(
-    vol: &Volume<D>,
-    lights: &Lights,
-    z: Vec3,
-    n: Vec3,
-    settings: &GateSettings,
-    rng: &mut Rng,
-) -> Vec3 {
-    let mut sum = Vec3::ZERO;
-    gate_sources(
-        vol,
-        lights,
-        z,
-        n,
-        settings,
-        1,
-        true,
-        true,
-        rng,
-        |_, v, _| sum += v,
-    );
-    sum
-}
-
-/// The walk behind [`accumulate_j_guided`] and [`accumulate_collided`]:
-/// calls `add(k, v, scattered)` with each gate's `v = w · α σ_t · ρ ·
-/// (S₁/b)(z_k, n_k)` for `k ≥ first` (`scattered`: the walk collided
-/// before the gate); with `collided_only`, gates before the first
-/// collision are skipped without their shadow rays.
-#[allow(clippy::too_many_arguments)] // accumulate_j_guided's and the switch
-fn gate_sources<D: DensityField>(
-    vol: &Volume<D>,
-    lights: &Lights,
-    z: Vec3,
-    n: Vec3,
-    settings: &GateSettings,
-    first: u32,
-    guided: bool,
-    collided_only: bool,
-    rng: &mut Rng,
-    mut add: impl FnMut(u32, Vec3, bool),
-) {
-    let scatter = vol.optics.albedo * vol.optics.sigma_t;
-    let rho_z = vol.density.density(z);
-    if settings.clock == Clock::OpticalDepth && rho_z <= 0.0 {
-        return;
+        });
     }
-    walk(
-        vol,
-        z,
-        n,
-        settings,
-        guided.then_some(lights),
-        rng,
-        |k, w, zk, nk, scattered, rng| {
-            if k < first || w == Vec3::ZERO || (collided_only && !scattered) {
-                return;
-            }
-            let rho = match settings.clock {
-                Clock::Geometric => vol.density.density(zk),
-                Clock::OpticalDepth => rho_z,
-            };
-            if rho <= 0.0 {
-                return;
-            }
-            let source = single_scatter_source(vol, lights, zk, nk, rng);
-            add(k, w * scatter * rho * source, scattered);
-        },
-        None,
-    );
-}
 
-/// One walk's estimate of `Ĵ_k(z, n)` for `k = 0..=N` (see
-/// [`accumulate_j`]).
-pub fn estimate_j<D: DensityField>(
-    vol: &Volume<D>,
-    lights: &Lights,
-    z: Vec3,
-    n: Vec3,
-    settings: &GateSettings,
-    rng: &mut Rng,
-) -> Vec<Vec3> {
-    let mut out = vec![Vec3::ZERO; settings.gate_count()];
-    accumulate_j(vol, lights, z, n, settings, rng, &mut out);
-    out
+    /// What one walk from `z` carried to its gates `k = 1..=N` through a
+    /// collision: [`collided`](super::chances::collided) of
+    /// [`Walks::accumulate_j_from`]'s two outputs (the same estimator),
+    /// without the shadow rays of the gates it passes before its first
+    /// collision, whose share that difference removes again. The walks
+    /// towards the eye need nothing else: on the puffs at `s* = 0.25`, 128
+    /// of them per light within reach, a light set took 1.74 s with every
+    /// gate's shadow ray and 1.61 s with these (three runs each).
+    pub fn accumulate_collided(&self, z: Vec3, n: Vec3, rng: &mut Rng) -> Vec3 {
+        let mut sum = Vec3::ZERO;
+        self.gate_sources(z, n, 1, true, rng, |_, v, _| sum += v);
+        sum
+    }
+
+    /// One walk's estimate of `Ĵ_k(z, n)` for `k = 0..=N` (see
+    /// [`Walks::accumulate_j`]).
+    pub fn estimate_j(&self, z: Vec3, n: Vec3, rng: &mut Rng) -> Vec<Vec3> {
+        let mut out = vec![Vec3::ZERO; self.gates.gate_count()];
+        self.accumulate_j(z, n, rng, &mut out);
+        out
+    }
+
+    /// The walk behind [`Walks::accumulate_j_from`] and
+    /// [`Walks::accumulate_collided`]: calls `add(k, v, scattered)` with
+    /// each gate's `v = w · α σ_t · ρ · (S₁/b)(z_k, n_k)` for `k ≥ first`
+    /// (`scattered`: the walk collided before the gate); with
+    /// `collided_only`, gates before the first collision are skipped
+    /// without their shadow rays.
+    fn gate_sources(
+        &self,
+        z: Vec3,
+        n: Vec3,
+        first: u32,
+        collided_only: bool,
+        rng: &mut Rng,
+        mut add: impl FnMut(u32, Vec3, bool),
+    ) {
+        let (vol, lights, clock) = (self.vol, self.lights, self.gates.clock);
+        let scatter = vol.optics.albedo * vol.optics.sigma_t;
+        let rho_z = vol.density.density(z);
+        if clock == Clock::OpticalDepth && rho_z <= 0.0 {
+            return;
+        }
+        self.walk(
+            z,
+            n,
+            rng,
+            |k, w, zk, nk, scattered, rng| {
+                if k < first || w == Vec3::ZERO || (collided_only && !scattered) {
+                    return;
+                }
+                let rho = match clock {
+                    Clock::Geometric => vol.density.density(zk),
+                    Clock::OpticalDepth => rho_z,
+                };
+                if rho <= 0.0 {
+                    return;
+                }
+                let source = single_scatter_source(vol, lights, zk, nk, rng);
+                add(k, w * scatter * rho * source, scattered);
+            },
+            None,
+        );
+    }
 }
 
 /// How one flight of a walk ends.
@@ -321,17 +273,14 @@ impl LazyClock {
     /// Marches the pending flights; returns the exact clock after them.
     fn resolve<D: DensityField>(&mut self, vol: &Volume<D>) -> f32 {
         for &(origin, dir, t0, t1, t_exit) in &self.pending[..self.len] {
-            if let ClockMarch::Exhausted(d) = march_clock(
-                vol,
-                Clock::OpticalDepth,
-                self.s_star,
+            let ray = ClockRay {
+                clock: Clock::OpticalDepth,
+                s_star: self.s_star,
                 origin,
                 dir,
-                t0,
                 t_exit,
-                t1,
-                f32::INFINITY,
-            ) {
+            };
+            if let ClockMarch::Exhausted(d) = march_clock(vol, &ray, t0, t1, f32::INFINITY) {
                 self.exact += d;
             }
         }
@@ -358,7 +307,7 @@ impl LazyClock {
 }
 
 /// One flight with the optical-depth clock over `[t_enter, t_exit]` of
-/// `origin + t dir`, the next gate at clock `gate_clock`, in one traversal
+/// `ray` (`origin + t dir`, its window that of `lazy`), the next gate at clock `gate_clock`, in one traversal
 /// of the majorant cells: spectral tracking's tentative collisions in
 /// order and, once a gate may be near, the clock alongside them. While the
 /// majorant optical depth says the gate cannot have come (see
@@ -371,18 +320,21 @@ impl LazyClock {
 /// before the next tentative collision. Tentative collisions past the gate
 /// are never drawn into the weight, so this is the same estimator as
 /// tracking to the gate: flights are memoryless.
-#[allow(clippy::too_many_arguments)] // one flight: ray, span, gate, state
 fn optical_depth_flight<D: DensityField>(
     vol: &Volume<D>,
-    origin: Vec3,
-    dir: Vec3,
+    ray: &ClockRay,
     t_enter: f32,
-    t_exit: f32,
     gate_clock: f32,
     lazy: &mut LazyClock,
     weight: &mut Vec3,
     rng: &mut Rng,
 ) -> Flight {
+    let &ClockRay {
+        origin,
+        dir,
+        t_exit,
+        ..
+    } = ray;
     // Bound mode: `bound` is an upper bound of the clock since
     // `lazy.exact`. Exact mode (`resolved`): `clock` is the clock from
     // `t_enter` to the current position on top of `lazy.exact`.
@@ -395,17 +347,7 @@ fn optical_depth_flight<D: DensityField>(
     // against what is left to the gate.
     let resolve_to = |lazy: &mut LazyClock, to: f32| {
         let exact = lazy.resolve(vol);
-        march_clock(
-            vol,
-            Clock::OpticalDepth,
-            lazy.s_star,
-            origin,
-            dir,
-            t_enter,
-            t_exit,
-            to,
-            gate_clock - exact,
-        )
+        march_clock(vol, ray, t_enter, to, gate_clock - exact)
     };
     let mut steps = TentativeSteps::new(rng);
     vol.majorants.walk(origin, dir, t_enter, t_exit, |a, b, m| {
@@ -415,7 +357,7 @@ fn optical_depth_flight<D: DensityField>(
             if resolved && m > 0.0 {
                 let left = gate_clock - lazy.exact;
                 let to = next.unwrap_or(b);
-                if let Some(t_gate) = lattice.advance(a, b, m, t, to, &mut clock, left) {
+                if let Some(t_gate) = lattice.advance((a, b, m), t, to, &mut clock, left) {
                     outcome = Some(Flight::Gate(t_gate));
                     return false;
                 }
@@ -474,141 +416,149 @@ fn optical_depth_flight<D: DensityField>(
     }
 }
 
-/// The walk itself; with `guide`, its directions after a collision come
-/// from [`guided_direction`] towards those lights. `on_gate(k, weight, z_k,
-/// n_k, scattered, rng)` also
-/// learns whether the walk has collided yet and receives the random stream,
-/// so that the caller can trace shadow rays; `on_collision(clock)`, if
-/// given, is called at every real collision with the clock's value there (a
-/// hook for tests: it makes the optical-depth clock resolve at every
-/// collision).
-#[allow(clippy::too_many_arguments)] // the start, the gates, the guide, the stream and two callbacks
-fn walk<D: DensityField>(
-    vol: &Volume<D>,
-    z: Vec3,
-    n: Vec3,
-    settings: &GateSettings,
-    guide: Option<&Lights>,
-    rng: &mut Rng,
-    mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, bool, &mut Rng),
-    mut on_collision: Option<&mut dyn FnMut(f32)>,
-) {
-    let s_star = settings.s_star.max(0.0);
-    let last = settings.n_terms;
-    let mut weight = Vec3::ONE;
-    on_gate(0, weight, z, n, false, rng);
-    if last == 0 {
-        return;
-    }
-    let mut next = 1u32;
-    let mut origin = z;
-    let mut dir = -n;
-    // The clock at `origin`: exactly `lazy.exact` with the geometric clock
-    // (which is never pending), `lazy.exact` plus the pending flights with
-    // the optical-depth clock.
-    let mut lazy = LazyClock::new(s_star, 0.0);
-    let mut collisions = 0u32;
-    // One flight per iteration: from `origin` to the next gate, the next
-    // real collision, or the exit of the box, whichever comes first.
-    loop {
-        let Some((t_enter, t_exit)) = vol.clip(origin, dir) else {
+impl<D: DensityField> Walks<'_, D> {
+    /// The walk itself ([`gated_walk`]); when guided, its directions after a
+    /// collision come from [`guided_direction`] towards the lights.
+    /// `on_gate(k, weight, z_k, n_k, scattered, rng)` also learns whether the
+    /// walk has collided yet and receives the random stream, so that the
+    /// caller can trace shadow rays; `on_collision(clock)`, if given, is
+    /// called at every real collision with the clock's value there (a hook
+    /// for tests: it makes the optical-depth clock resolve at every
+    /// collision).
+    fn walk(
+        &self,
+        z: Vec3,
+        n: Vec3,
+        rng: &mut Rng,
+        mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, bool, &mut Rng),
+        mut on_collision: Option<&mut dyn FnMut(f32)>,
+    ) {
+        let (vol, settings) = (self.vol, &self.gates);
+        let guide = self.guided.then_some(self.lights);
+        let s_star = settings.s_star.max(0.0);
+        let last = settings.n_terms;
+        let mut weight = Vec3::ONE;
+        on_gate(0, weight, z, n, false, rng);
+        if last == 0 {
             return;
-        };
-        let clock_at_enter = match settings.clock {
-            Clock::Geometric => lazy.exact + t_enter,
-            Clock::OpticalDepth => lazy.exact,
-        };
-        // Gates in the vacuum before the box (only when `z` is outside it,
-        // and only for the geometric clock).
-        while settings.clock == Clock::Geometric && next as f32 * s_star <= clock_at_enter {
-            let t = next as f32 * s_star - lazy.exact;
-            on_gate(next, weight, origin + dir * t, -dir, collisions > 0, rng);
-            if next == last {
-                return;
-            }
-            next += 1;
         }
-        let gate_clock = next as f32 * s_star;
-        let flight = match settings.clock {
-            Clock::OpticalDepth => optical_depth_flight(
-                vol,
-                origin,
-                dir,
-                t_enter,
-                t_exit,
-                gate_clock,
-                &mut lazy,
-                &mut weight,
-                rng,
-            ),
-            Clock::Geometric => {
-                // The gate is `budget` further along the ray, the
-                // collision wherever tracking puts it before then.
-                let budget = gate_clock - clock_at_enter;
-                let gate_t = (t_enter + budget <= t_exit).then_some(t_enter + budget);
-                match free_flight(
-                    vol,
-                    origin,
-                    dir,
-                    t_enter,
-                    gate_t.unwrap_or(t_exit),
-                    &mut weight,
-                    rng,
-                ) {
-                    Some(t_hit) => Flight::Collision {
-                        t: t_hit,
-                        advanced: Some(t_hit),
-                    },
-                    None => gate_t.map_or(Flight::Exit, Flight::Gate),
-                }
-            }
-        };
-        match flight {
-            Flight::Collision { t: t_hit, advanced } => {
-                if let Some(advanced) = advanced {
-                    // Rounding must not put the collision past the gate.
-                    lazy.exact = (lazy.exact + advanced).min(gate_clock);
-                }
-                origin += dir * t_hit;
-                if let Some(hook) = on_collision.as_deref_mut() {
-                    hook(lazy.resolve(vol).min(gate_clock));
-                }
-                weight *= vol.optics.albedo;
-                collisions += 1;
-                if collisions >= settings.rr_start {
-                    let q = weight.max_element().min(0.95);
-                    if q <= 0.0 || rng.next_f32() >= q {
-                        return;
-                    }
-                    weight /= q;
-                }
-                let (u1, u2) = (rng.next_f32(), rng.next_f32());
-                dir = match guide.filter(|_| collisions <= GUIDED_COLLISIONS) {
-                    Some(lights) => {
-                        let (d, factor) =
-                            guided_direction(vol.optics.g, lights, origin, dir, u1, u2, rng);
-                        weight *= factor;
-                        d
-                    }
-                    None => phase::sample_hg(vol.optics.g, dir, u1, u2),
-                };
-            }
-            Flight::Exit => return,
-            Flight::Gate(t) => {
-                if weight == Vec3::ZERO {
-                    return;
-                }
-                origin += dir * t;
-                on_gate(next, weight, origin, -dir, collisions > 0, rng);
+        let mut next = 1u32;
+        let mut origin = z;
+        let mut dir = -n;
+        // The clock at `origin`: exactly `lazy.exact` with the geometric clock
+        // (which is never pending), `lazy.exact` plus the pending flights with
+        // the optical-depth clock.
+        let mut lazy = LazyClock::new(s_star, 0.0);
+        let mut collisions = 0u32;
+        // One flight per iteration: from `origin` to the next gate, the next
+        // real collision, or the exit of the box, whichever comes first.
+        loop {
+            let Some((t_enter, t_exit)) = vol.clip(origin, dir) else {
+                return;
+            };
+            let clock_at_enter = match settings.clock {
+                Clock::Geometric => lazy.exact + t_enter,
+                Clock::OpticalDepth => lazy.exact,
+            };
+            // Gates in the vacuum before the box (only when `z` is outside it,
+            // and only for the geometric clock).
+            while settings.clock == Clock::Geometric && next as f32 * s_star <= clock_at_enter {
+                let t = next as f32 * s_star - lazy.exact;
+                on_gate(next, weight, origin + dir * t, -dir, collisions > 0, rng);
                 if next == last {
                     return;
                 }
                 next += 1;
-                // The flight goes on from the gate: flights are memoryless,
-                // and the quadrature lattice is re-anchored here. A gate is
-                // only found with the clock resolved: nothing is pending.
-                debug_assert_eq!(lazy.len, 0);
-                lazy.exact = gate_clock;
+            }
+            let gate_clock = next as f32 * s_star;
+            let flight = match settings.clock {
+                Clock::OpticalDepth => {
+                    let ray = ClockRay {
+                        clock: Clock::OpticalDepth,
+                        s_star,
+                        origin,
+                        dir,
+                        t_exit,
+                    };
+                    optical_depth_flight(
+                        vol,
+                        &ray,
+                        t_enter,
+                        gate_clock,
+                        &mut lazy,
+                        &mut weight,
+                        rng,
+                    )
+                }
+                Clock::Geometric => {
+                    // The gate is `budget` further along the ray, the
+                    // collision wherever tracking puts it before then.
+                    let budget = gate_clock - clock_at_enter;
+                    let gate_t = (t_enter + budget <= t_exit).then_some(t_enter + budget);
+                    match free_flight(
+                        vol,
+                        origin,
+                        dir,
+                        t_enter,
+                        gate_t.unwrap_or(t_exit),
+                        &mut weight,
+                        rng,
+                    ) {
+                        Some(t_hit) => Flight::Collision {
+                            t: t_hit,
+                            advanced: Some(t_hit),
+                        },
+                        None => gate_t.map_or(Flight::Exit, Flight::Gate),
+                    }
+                }
+            };
+            match flight {
+                Flight::Collision { t: t_hit, advanced } => {
+                    if let Some(advanced) = advanced {
+                        // Rounding must not put the collision past the gate.
+                        lazy.exact = (lazy.exact + advanced).min(gate_clock);
+                    }
+                    origin += dir * t_hit;
+                    if let Some(hook) = on_collision.as_deref_mut() {
+                        hook(lazy.resolve(vol).min(gate_clock));
+                    }
+                    weight *= vol.optics.albedo;
+                    collisions += 1;
+                    if collisions >= settings.rr_start {
+                        let q = weight.max_element().min(0.95);
+                        if q <= 0.0 || rng.next_f32() >= q {
+                            return;
+                        }
+                        weight /= q;
+                    }
+                    let (u1, u2) = (rng.next_f32(), rng.next_f32());
+                    dir = match guide.filter(|_| collisions <= GUIDED_COLLISIONS) {
+                        Some(lights) => {
+                            let (d, factor) =
+                                guided_direction(vol.optics.g, lights, origin, dir, u1, u2, rng);
+                            weight *= factor;
+                            d
+                        }
+                        None => phase::sample_hg(vol.optics.g, dir, u1, u2),
+                    };
+                }
+                Flight::Exit => return,
+                Flight::Gate(t) => {
+                    if weight == Vec3::ZERO {
+                        return;
+                    }
+                    origin += dir * t;
+                    on_gate(next, weight, origin, -dir, collisions > 0, rng);
+                    if next == last {
+                        return;
+                    }
+                    next += 1;
+                    // The flight goes on from the gate: flights are memoryless,
+                    // and the quadrature lattice is re-anchored here. A gate is
+                    // only found with the clock resolved: nothing is pending.
+                    debug_assert_eq!(lazy.len, 0);
+                    lazy.exact = gate_clock;
+                }
             }
         }
     }
@@ -628,12 +578,15 @@ mod tests {
             let mut rng = Rng::for_sample(5, w, 0);
             let mut per_window = vec![0usize; settings.n_terms as usize];
             let s = settings.s_star;
-            walk(
+            let walks = Walks {
                 vol,
+                lights: &Lights::default(),
+                gates: *settings,
+                guided: false,
+            };
+            walks.walk(
                 Vec3::ZERO,
                 Vec3::Z,
-                settings,
-                None,
                 &mut rng,
                 |_, _, _, _, _, _| {},
                 Some(&mut |clock: f32| {
@@ -650,26 +603,26 @@ mod tests {
         hist
     }
 
-    /// [`accumulate_collided`] skips the shadow rays of the gates before
+    /// [`Walks::accumulate_collided`] skips the shadow rays of the gates before
     /// the first collision and keeps the estimator: in the medium of
     /// `guided_walks_keep_the_mean`, its mean agrees per channel with
-    /// [`collided`](super::chances::collided) of [`accumulate_j_from`]'s outputs within 4.5 standard
+    /// [`collided`](super::chances::collided) of [`Walks::accumulate_j_from`]'s outputs within 4.5 standard
     /// errors of the difference, and both are far from the uncollided
     /// part it leaves out (which would show if it kept or lost a share).
     #[test]
     fn collided_walks_match_the_collided_part() {
         let (vol, lights, settings, z, n) = forward_scattering_walk();
-        let walks = 200_000u32;
+        let walks = Walks::guided(&vol, &lights, settings);
+        let count = 200_000u32;
         let mut uncollided = Vec3::ZERO;
-        let (full, full_var) = mean_and_its_variance(walks, 23, 0, |rng| {
-            let (collided, before) = split_walk(&vol, &lights, &settings, z, n, true, rng);
+        let (full, full_var) = mean_and_its_variance(count, 23, 0, |rng| {
+            let (collided, before) = split_walk(&walks, z, n, rng);
             uncollided += before;
             collided
         });
-        uncollided /= walks as f32;
-        let (skip, skip_var) = mean_and_its_variance(walks, 23, 1, |rng| {
-            accumulate_collided(&vol, &lights, z, n, &settings, rng)
-        });
+        uncollided /= count as f32;
+        let (skip, skip_var) =
+            mean_and_its_variance(count, 23, 1, |rng| walks.accumulate_collided(z, n, rng));
         eprintln!("collided {full} (with every gate), {skip} (skipping), uncollided {uncollided}");
         for c in 0..3 {
             let se = (full_var[c] + skip_var[c]).sqrt();
@@ -752,12 +705,15 @@ mod tests {
                     let mut rng = Rng::for_sample(11, w, 0);
                     let mut out = Vec::new();
                     let mut hook = |_: f32| {};
-                    walk(
-                        &vol,
+                    let walks = Walks {
+                        vol: &vol,
+                        lights: &Lights::default(),
+                        gates: settings,
+                        guided: false,
+                    };
+                    walks.walk(
                         Vec3::new(0.3, -0.2, 0.1),
                         Vec3::Z,
-                        &settings,
-                        None,
                         &mut rng,
                         |k, _, p, _, scattered, _| out.push((k, p, scattered)),
                         resolve_each.then_some(&mut hook as &mut dyn FnMut(f32)),
