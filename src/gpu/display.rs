@@ -14,23 +14,12 @@
 use wgpu::util::DeviceExt;
 
 use super::context::{GpuContext, GpuError};
-use super::mirrors::GpuAccum;
-use super::renderer::{compute_pipeline, read_buffer, GpuImage, WORKGROUP_SIDE};
+use super::mirrors::{
+    GpuAccum, MODE_HEAT, MODE_SINGLE, MODE_SPLIT, VIEW_CLAMP, VIEW_FILMIC, WORKGROUP_SIDE,
+};
+use super::renderer::{compute_pipeline, read_buffer, GpuImage};
 use super::shaders::{DISPLAY_MODULE, DISPLAY_STATS_MODULE};
 use crate::render::tonemap::ViewTransform;
-
-/// `view` of the clamp transform (generated into the WGSL prelude, as are
-/// the other tags here).
-pub const VIEW_CLAMP: u32 = 0;
-/// `view` of the filmic transform.
-pub const VIEW_FILMIC: u32 = 1;
-
-/// `mode` of [`DisplayMode::Single`].
-pub const MODE_SINGLE: u32 = 0;
-/// `mode` of [`DisplayMode::Split`].
-pub const MODE_SPLIT: u32 = 1;
-/// `mode` of [`DisplayMode::Heat`].
-pub const MODE_HEAT: u32 = 2;
 
 /// The format of the display texture.
 pub const DISPLAY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;

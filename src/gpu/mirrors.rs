@@ -537,6 +537,38 @@ impl GpuAccum {
     }
 }
 
+// Dispatch sizes, bounds and tags that the WGSL prelude is generated
+// from (src/gpu/shaders.rs): defined here, beside the layouts, so that
+// the shader assembler imports no pipeline.
+
+/// Workgroup side in pixels of the image passes (`WORKGROUP_SIDE`).
+pub const WORKGROUP_SIDE: u32 = 8;
+
+/// Invocations per workgroup of the walks, one walk each per dispatch (the
+/// WGSL's `WALK_LANES` is generated from it).
+pub const WALK_LANES: u32 = 64;
+
+/// Invocations per workgroup of the placement (the WGSL's
+/// `PLACEMENT_LANES`, its `@workgroup_size`, is generated from it).
+pub const PLACEMENT_LANES: u32 = 64;
+
+/// The largest series truncation `N` the GPU walks support: each
+/// invocation keeps its walk's `N + 1` terms in a private array (the
+/// WGSL's `GPU_MAX_GATES` is generated as this plus one).
+pub const GPU_MAX_TERMS: u32 = 256;
+
+/// `view` of the display's clamp transform (`VIEW_CLAMP`).
+pub const VIEW_CLAMP: u32 = 0;
+/// `view` of the display's filmic transform.
+pub const VIEW_FILMIC: u32 = 1;
+
+/// `mode` of the display's [`DisplayMode::Single`](super::display::DisplayMode::Single).
+pub const MODE_SINGLE: u32 = 0;
+/// `mode` of the display's [`DisplayMode::Split`](super::display::DisplayMode::Split).
+pub const MODE_SPLIT: u32 = 1;
+/// `mode` of the display's [`DisplayMode::Heat`](super::display::DisplayMode::Heat).
+pub const MODE_HEAT: u32 = 2;
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -16,14 +16,10 @@ use wgpu::util::DeviceExt;
 
 use super::context::{GpuContext, GpuError};
 use super::mirrors::{
-    density_voxels, gpu_environment, gpu_lights, GpuAccum, GpuPassParams, GpuScene,
+    density_voxels, gpu_environment, gpu_lights, GpuAccum, GpuPassParams, GpuScene, WORKGROUP_SIDE,
 };
 use super::shaders::{ModuleSource, REFERENCE_MODULE};
 use crate::render::{Film, Prepared};
-
-/// Workgroup side in pixels (the WGSL's `WORKGROUP_SIDE` is generated from
-/// it).
-pub const WORKGROUP_SIDE: u32 = 8;
 
 /// A compute pipeline built from one assembled module, with its bind-group
 /// layout taken from the shader.

@@ -152,17 +152,17 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!("L1_FIELD", U32, crate::scene::L1Form::Field.tag()),
     shared!("L1_POINTS", U32, crate::scene::L1Form::Points.tag()),
     // The display pass (`gpu/display.rs`).
-    shared!("VIEW_CLAMP", U32, crate::gpu::display::VIEW_CLAMP),
-    shared!("VIEW_FILMIC", U32, crate::gpu::display::VIEW_FILMIC),
-    shared!("MODE_SINGLE", U32, crate::gpu::display::MODE_SINGLE),
-    shared!("MODE_SPLIT", U32, crate::gpu::display::MODE_SPLIT),
-    shared!("MODE_HEAT", U32, crate::gpu::display::MODE_HEAT),
+    shared!("VIEW_CLAMP", U32, crate::gpu::mirrors::VIEW_CLAMP),
+    shared!("VIEW_FILMIC", U32, crate::gpu::mirrors::VIEW_FILMIC),
+    shared!("MODE_SINGLE", U32, crate::gpu::mirrors::MODE_SINGLE),
+    shared!("MODE_SPLIT", U32, crate::gpu::mirrors::MODE_SPLIT),
+    shared!("MODE_HEAT", U32, crate::gpu::mirrors::MODE_HEAT),
     // Workgroup sizes the dispatches count with.
-    shared!("WORKGROUP_SIDE", U32, crate::gpu::renderer::WORKGROUP_SIDE),
-    shared!("WALK_LANES", U32, crate::gpu::walks::WALK_LANES),
-    shared!("PLACEMENT_LANES", U32, crate::gpu::walks::PLACEMENT_LANES),
+    shared!("WORKGROUP_SIDE", U32, crate::gpu::mirrors::WORKGROUP_SIDE),
+    shared!("WALK_LANES", U32, crate::gpu::mirrors::WALK_LANES),
+    shared!("PLACEMENT_LANES", U32, crate::gpu::mirrors::PLACEMENT_LANES),
     // The walks' private array of gates, `N + 1` for the largest `N`.
-    shared!("GPU_MAX_GATES", U32, crate::gpu::walks::GPU_MAX_TERMS + 1),
+    shared!("GPU_MAX_GATES", U32, crate::gpu::mirrors::GPU_MAX_TERMS + 1),
     // Random stream tags.
     shared!(
         "PLACEMENT_PASS",

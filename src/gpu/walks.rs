@@ -36,7 +36,9 @@ use glam::Vec3;
 use wgpu::util::DeviceExt;
 
 use super::context::{GpuContext, GpuError};
-use super::mirrors::{GpuPassParams, GpuPlacementParams, GpuWalkParams};
+use super::mirrors::{
+    GpuPassParams, GpuPlacementParams, GpuWalkParams, GPU_MAX_TERMS, PLACEMENT_LANES, WALK_LANES,
+};
 use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
 use crate::physics::internal::sources::{
@@ -46,19 +48,6 @@ use crate::physics::internal::sources::{
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::sh::{sh_count, MAX_ORDER};
 use crate::render::Prepared;
-
-/// Invocations per workgroup of the walks, one walk each per dispatch (the
-/// WGSL's `WALK_LANES` is generated from it).
-pub const WALK_LANES: u32 = 64;
-
-/// Invocations per workgroup of the placement (the WGSL's
-/// `PLACEMENT_LANES`, its `@workgroup_size`, is generated from it).
-pub const PLACEMENT_LANES: u32 = 64;
-
-/// The largest series truncation `N` the GPU walks support: each
-/// invocation keeps its walk's `N + 1` terms in a private array (the
-/// WGSL's `GPU_MAX_GATES` is generated as this plus one).
-pub const GPU_MAX_TERMS: u32 = 256;
 
 /// One vec4 of a GPU buffer, read back.
 type Vec4 = [f32; 4];
