@@ -16,5 +16,7 @@ pub mod phase;
 pub mod reference;
 pub mod rng;
 pub mod sh;
+#[cfg(test)]
+pub(crate) mod testing;
 pub mod tracking;
 pub mod volume;

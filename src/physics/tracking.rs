@@ -305,35 +305,10 @@ pub fn transmittance_at_rate<D: DensityField>(
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
+    use crate::physics::testing::Ball;
     use crate::physics::volume::Optics;
-
-    /// A homogeneous sphere of density 1.
-    pub(crate) struct Ball {
-        pub radius: f32,
-    }
-
-    impl DensityField for Ball {
-        fn density(&self, p: Vec3) -> f32 {
-            if p.length_squared() <= self.radius * self.radius {
-                1.0
-            } else {
-                0.0
-            }
-        }
-        fn bounds(&self) -> (Vec3, Vec3) {
-            (Vec3::splat(-self.radius), Vec3::splat(self.radius))
-        }
-        fn max_in_box(&self, lo: Vec3, hi: Vec3) -> f32 {
-            let q = Vec3::ZERO.clamp(lo, hi);
-            if q.length_squared() <= self.radius * self.radius {
-                1.0
-            } else {
-                0.0
-            }
-        }
-    }
 
     fn ball(sigma_t: Vec3) -> Volume<Ball> {
         Volume::new(

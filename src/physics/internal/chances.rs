@@ -148,7 +148,7 @@ pub const COLLISION_FLOOR: f32 = 0.05;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::internal::testing::*;
+    use crate::physics::testing::*;
 
     /// The chances along a ray, asked for from its far end back, are the
     /// per-point [`collision_probability`] up to the quadrature (and both

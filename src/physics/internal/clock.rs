@@ -390,8 +390,8 @@ pub fn clock_to<D: DensityField>(vol: &Volume<D>, ray: &ClockRay, t: f32) -> f32
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::internal::testing::*;
     use crate::physics::rng::Rng;
+    use crate::physics::testing::*;
 
     /// One march gives every point the clock that a march from the ray's
     /// start to that point gives (the same lattice), for both clocks,

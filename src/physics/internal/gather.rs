@@ -538,8 +538,8 @@ fn field_l1_at<D: DensityField>(
 mod tests {
     use super::*;
     use crate::physics::internal::sources::{InternalLight, InternalParams, LightSources};
-    use crate::physics::internal::testing::*;
     use crate::physics::sh::sh_count;
+    use crate::physics::testing::*;
 
     /// One isotropic internal light in a homogeneous cube gathers, on
     /// average, to the quadrature of [method §6](crate::doc::method)'s `L₀` (its kernel

@@ -118,8 +118,8 @@ pub fn guided_direction(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::internal::testing::*;
     use crate::physics::internal::walk::Walks;
+    use crate::physics::testing::*;
 
     /// Guiding the walks towards the light changes their spread, not their
     /// mean: in a bounded, forward-scattering, heterogeneous medium lit by

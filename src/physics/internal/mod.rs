@@ -34,6 +34,3 @@ pub mod segment_pdf;
 pub mod sources;
 pub mod view_placement;
 pub mod walk;
-
-#[cfg(test)]
-pub(crate) mod testing;

@@ -150,10 +150,10 @@ impl InternalLights {
 mod tests {
     use super::*;
     use crate::physics::internal::sources::{InternalLight, InternalParams, L1Form};
-    use crate::physics::internal::testing::*;
     use crate::physics::phase;
     use crate::physics::rng::Rng;
     use crate::physics::sh::sh_count;
+    use crate::physics::testing::*;
 
     /// The kernel reconstruction (which reads copies of the lights in the
     /// fine grid's order and sums their coefficients before evaluating

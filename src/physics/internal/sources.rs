@@ -1123,7 +1123,7 @@ const Y00: f32 = 0.282_094_8;
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::internal::testing::*;
+    use crate::physics::testing::*;
 
     /// The walks towards the eye estimate what the lights' harmonics hold
     /// in that direction: over 1024 lights of a sunlit cube (`g` 0, so the

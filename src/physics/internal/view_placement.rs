@@ -148,7 +148,7 @@ pub fn knn_kernel_radius(positions: &[Vec3], k: usize, samples: usize) -> Option
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::physics::tracking::tests::Ball;
+    use crate::physics::testing::Ball;
     use crate::physics::volume::Optics;
 
     fn frame() -> ViewFrame {

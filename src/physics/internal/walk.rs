@@ -568,7 +568,7 @@ impl<D: DensityField> Walks<'_, D> {
 mod tests {
     use super::*;
     use crate::physics::internal::clock::{clock_cell, clock_step};
-    use crate::physics::internal::testing::*;
+    use crate::physics::testing::*;
 
     /// Collisions per window of the clock for `walks` walks: a histogram of
     /// counts in windows `1..=N` (the windows between consecutive gates).

@@ -1,17 +1,48 @@
-//! Test media and helpers shared by the internal-lights method's unit
-//! tests: media with known optics, hand-built light sets, and the
-//! statistics (χ², means with their variance) the tests judge by.
+//! Test media and helpers shared by the physics' unit tests: media with
+//! known optics (a sphere, a cube, a smooth unbounded field), hand-built
+//! internal-light sets, and the statistics (χ², means with their
+//! variance) the tests judge by. (The integration tests' image
+//! statistics are [`crate::render::stats`].)
 
 use glam::Vec3;
 
-use super::chances::collided;
-use super::clock::{Clock, GateSettings};
-use super::sources::{InternalLight, InternalLights, InternalParams, L1Form, LightSources};
-use super::walk::Walks;
-use crate::physics::lights::Lights;
-use crate::physics::rng::Rng;
-use crate::physics::sh::sh_count;
-use crate::physics::volume::{DensityField, Optics, Volume};
+use super::internal::chances::collided;
+use super::internal::clock::{Clock, GateSettings};
+use super::internal::sources::{
+    InternalLight, InternalLights, InternalParams, L1Form, LightSources,
+};
+use super::internal::walk::Walks;
+use super::lights::Lights;
+use super::rng::Rng;
+use super::sh::sh_count;
+use super::volume::{DensityField, Optics, Volume};
+
+/// A homogeneous sphere of density 1 about the origin, its box its
+/// bounding cube.
+pub(crate) struct Ball {
+    pub radius: f32,
+}
+
+impl DensityField for Ball {
+    fn density(&self, p: Vec3) -> f32 {
+        if p.length_squared() <= self.radius * self.radius {
+            1.0
+        } else {
+            0.0
+        }
+    }
+    fn bounds(&self) -> (Vec3, Vec3) {
+        (Vec3::splat(-self.radius), Vec3::splat(self.radius))
+    }
+    fn max_in_box(&self, lo: Vec3, hi: Vec3) -> f32 {
+        let q = Vec3::ZERO.clamp(lo, hi);
+        if q.length_squared() <= self.radius * self.radius {
+            1.0
+        } else {
+            0.0
+        }
+    }
+}
 
 /// Density `base + amp·sin(x)·sin(y)` in a box so large that no walk
 /// leaves it: an unbounded medium.
