@@ -84,8 +84,8 @@ fn a_far_point_light_does_not_hang() {
                 position: Vec3::new(3e19, 0.0, 0.0),
                 intensity: Vec3::ONE,
             });
-            s.render.internal.lights = 256;
-            s.render.internal.walks = 8;
+            s.render.internal.knobs.lights = 256;
+            s.render.internal.expert.walks = 8;
         });
         let mean = within(20.0, &format!("far light, {method:?}"), move || {
             let prepared = Prepared::new(scene, Path::new(".")).unwrap();
@@ -146,8 +146,8 @@ fn a_dense_voxel_renders_at_once() {
                 let mut scene = scene_with(|s| {
                     s.camera.width = 32;
                     s.camera.height = 32;
-                    s.render.internal.lights = 512;
-                    s.render.internal.walks = 8;
+                    s.render.internal.knobs.lights = 512;
+                    s.render.internal.expert.walks = 8;
                 });
                 scene.render.method = method;
                 let prepared = Prepared::with_density(scene, one_dense_voxel(value));
@@ -387,8 +387,8 @@ fn meaningless_windows_and_kernels_are_warned_about() {
         s.camera.width = 8;
         s.camera.height = 8;
         s.render.spp = 1;
-        s.render.internal.lights = 256;
-        s.render.internal.walks = 4;
+        s.render.internal.knobs.lights = 256;
+        s.render.internal.expert.walks = 4;
     }));
     for (flag, value, words) in [
         ("--s-star", "1e-30", "far shorter than a voxel"),

@@ -358,8 +358,8 @@ const CPU_SPP_PER_GPU_SPP: u32 = 8;
 /// many on the CPU, and compares.
 fn agree_gather(scene: &str, clock: Clock, l1: L1Form, side: u32, spp: u32) {
     agree_gather_with(scene, side, spp, |s| {
-        s.clock = clock;
-        s.l1 = l1;
+        s.expert.clock = clock;
+        s.expert.l1 = l1;
     });
 }
 
@@ -392,12 +392,12 @@ fn agree_gather_prepared(
     // `gather_agrees_puffs_at_the_defaults` tests).
     let i = &mut settings.internal;
     (
-        i.view_share,
-        i.view_walks,
-        i.light_samples,
-        i.window_scatters,
+        i.expert.view_share,
+        i.expert.view_walks,
+        i.expert.light_samples,
+        i.expert.window_scatters,
     ) = (0.0, 0, 2, 1);
-    (i.terms, i.walks) = (16, 64);
+    (i.knobs.terms, i.expert.walks) = (16, 64);
     edit(&mut settings.internal);
     let t = Instant::now();
     let cache = common::build_lights(&prepared, &settings);
@@ -405,13 +405,18 @@ fn agree_gather_prepared(
     let t = Instant::now();
     settings.seed = 1;
     // Both backends gather with this one set.
-    settings.internal.resample_every = 0;
+    settings.internal.expert.resample_every = 0;
     let cpu = common::gather_cpu(&prepared, &settings, &cache, spp * CPU_SPP_PER_GPU_SPP);
     let cpu_secs = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let mut renderer =
-        GpuRenderer::internal(&ctx, &prepared, &cache, settings.internal.light_samples, 2)
-            .unwrap_or_else(|e| panic!("{e:#}"));
+    let mut renderer = GpuRenderer::internal(
+        &ctx,
+        &prepared,
+        &cache,
+        settings.internal.expert.light_samples,
+        2,
+    )
+    .unwrap_or_else(|e| panic!("{e:#}"));
     let image = common::gpu_render(&mut renderer, spp);
     let gpu_secs = t.elapsed().as_secs_f64();
     common::compare_backends(
@@ -521,7 +526,7 @@ fn gather_agrees_puffs_at_the_defaults() {
 fn gather_agrees_puffs_with_eight_gather_points() {
     agree_gather_with("assets/scenes/puffs_grid.ron", 24, 128, |s| {
         *s = lantern::scene::InternalSettings::default();
-        s.light_samples = 8;
+        s.expert.light_samples = 8;
     });
 }
 
@@ -544,8 +549,8 @@ fn gather_agrees_chromatic_sphere() {
 #[test]
 fn gather_agrees_chromatic_sphere_three_window_scatterings() {
     agree_gather_with("assets/scenes/chromatic_sphere.ron", 24, 256, |s| {
-        s.s_star = Some(2.0);
-        s.window_scatters = 3;
+        s.knobs.s_star = Some(2.0);
+        s.expert.window_scatters = 3;
     });
 }
 
@@ -556,11 +561,11 @@ fn gather_agrees_chromatic_sphere_three_window_scatterings() {
 #[test]
 fn gather_agrees_puffs_view_walks() {
     let Some((_, _, cache)) = agree_gather_with("assets/scenes/puffs_grid.ron", 24, 256, |s| {
-        s.s_star = Some(0.5);
-        s.terms = 40;
-        s.lights = 2048;
-        s.walks = 16;
-        s.view_walks = 16;
+        s.knobs.s_star = Some(0.5);
+        s.knobs.terms = 40;
+        s.knobs.lights = 2048;
+        s.expert.walks = 16;
+        s.expert.view_walks = 16;
     }) else {
         return;
     };
@@ -575,9 +580,9 @@ fn gather_agrees_puffs_view_walks() {
 #[test]
 fn gather_agrees_puffs_few_walks_unclamped() {
     let edit = |s: &mut InternalSettings| {
-        s.walks = 4;
-        s.lights = 1024;
-        s.resample_every = 4;
+        s.expert.walks = 4;
+        s.knobs.lights = 1024;
+        s.expert.resample_every = 4;
     };
     let Some((prepared, _, cache)) =
         agree_gather_with("assets/scenes/puffs_grid.ron", 24, 256, edit)
@@ -1127,8 +1132,8 @@ fn gather_mean(prepared: &Arc<Prepared>, cache: InternalLights, spp: u32, seed: 
     settings.seed = seed;
     // The one set given, gathered as these tests were written for (a
     // renewed set would replace the GPU-built lights with CPU-built ones).
-    settings.internal.light_samples = 2;
-    settings.internal.resample_every = 0;
+    settings.internal.expert.light_samples = 2;
+    settings.internal.expert.resample_every = 0;
     let renderer = Renderer::with_lights(prepared.clone(), &settings, Some(Arc::new(cache)));
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let mut film = Film::new(w, h);
@@ -1317,8 +1322,8 @@ fn renewed_light_set_replaces_the_gpu_lights() {
     let prepared = Arc::new(common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
         s.camera.width = 16;
         s.camera.height = 16;
-        s.render.internal.lights = 256;
-        s.render.internal.walks = 1;
+        s.render.internal.knobs.lights = 256;
+        s.render.internal.expert.walks = 1;
     }));
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
@@ -1328,7 +1333,7 @@ fn renewed_light_set_replaces_the_gpu_lights() {
         InternalLights::build(&prepared.volume, &prepared.lights, &params, &never).unwrap()
     };
     let (first, second) = (set(0), set(1));
-    let samples = settings.internal.light_samples;
+    let samples = settings.internal.expert.light_samples;
     let gather = |lights: &InternalLights, passes: std::ops::Range<u32>| {
         let mut r = GpuRenderer::internal(&ctx, &prepared, lights, samples, 5)
             .unwrap_or_else(|e| panic!("{e:#}"));
@@ -1450,8 +1455,11 @@ fn passes_cut_short_by_the_driver_are_reported() {
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
     settings.seed = 3;
-    (settings.internal.lights, settings.internal.walks) = (512, 4);
-    settings.internal.resample_every = 0;
+    (
+        settings.internal.knobs.lights,
+        settings.internal.expert.walks,
+    ) = (512, 4);
+    settings.internal.expert.resample_every = 0;
     let cache = common::build_lights(&prepared, &settings);
     let cut_at = |light_samples: u32, window_scatters: u32| {
         // Window scatterings are the gather's alone: the same lights.

@@ -66,13 +66,13 @@ fn prepare_32(
         s.camera.width = 32;
         s.camera.height = 32;
         let i = &mut s.render.internal;
-        i.clock = Clock::OpticalDepth;
-        i.s_star = Some(s_star);
-        i.terms = terms;
-        i.lights = lights;
-        i.walks = walks;
-        i.sh_order = sh_order;
-        i.l1 = L1Form::Field;
+        i.expert.clock = Clock::OpticalDepth;
+        i.knobs.s_star = Some(s_star);
+        i.knobs.terms = terms;
+        i.knobs.lights = lights;
+        i.expert.walks = walks;
+        i.expert.sh_order = sh_order;
+        i.expert.l1 = L1Form::Field;
         note_placement(i);
     }))
 }
@@ -83,11 +83,11 @@ fn prepare_32(
 /// (the settings before the defaults of `Quality::Final`; they test the
 /// note's estimator converging, the defaults are tested below).
 fn note_placement(i: &mut lantern::scene::InternalSettings) {
-    i.view_share = 0.0;
-    i.view_walks = 0;
-    i.window_scatters = 1;
-    i.light_samples = 2;
-    i.resample_every = 0;
+    i.expert.view_share = 0.0;
+    i.expert.view_walks = 0;
+    i.expert.window_scatters = 1;
+    i.expert.light_samples = 2;
+    i.expert.resample_every = 0;
 }
 
 fn check(rel: &str, lights: u32, reference_spp: u32) {
@@ -179,15 +179,15 @@ fn puffs_view_walks_agree_with_reference() {
         s.camera.width = 32;
         s.camera.height = 32;
         let i = &mut s.render.internal;
-        i.clock = Clock::OpticalDepth;
-        i.s_star = Some(0.25);
-        i.terms = 160;
-        i.lights = 16384;
-        i.walks = 64;
+        i.expert.clock = Clock::OpticalDepth;
+        i.knobs.s_star = Some(0.25);
+        i.knobs.terms = 160;
+        i.knobs.lights = 16384;
+        i.expert.walks = 64;
         note_placement(i);
-        i.view_walks = 256;
-        i.sh_order = 4;
-        i.l1 = L1Form::Field;
+        i.expert.view_walks = 256;
+        i.expert.sh_order = 4;
+        i.expert.l1 = L1Form::Field;
     }));
     let reference = common::render(&prepared, Method::Reference, 7, 32768);
     let internal = common::render(&prepared, Method::Internal, 8, 1024);

@@ -91,8 +91,8 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
     println!("prepared (majorants) in {:.2} s", t.elapsed().as_secs_f64());
     let mut settings = prepared.scene.render.clone();
     settings.seed = 1;
-    settings.internal.lights = 2048;
-    settings.internal.walks = 32;
+    settings.internal.knobs.lights = 2048;
+    settings.internal.expert.walks = 32;
 
     // Reference on the CPU: eight times the GPU's samples (cheap here), so
     // the comparison's noise is mostly the GPU's.
@@ -143,9 +143,14 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
     drop(renderer);
 
     let t = Instant::now();
-    let mut renderer =
-        GpuRenderer::internal(&ctx, &prepared, &cache, settings.internal.light_samples, 2)
-            .unwrap_or_else(|e| panic!("{e:#}"));
+    let mut renderer = GpuRenderer::internal(
+        &ctx,
+        &prepared,
+        &cache,
+        settings.internal.expert.light_samples,
+        2,
+    )
+    .unwrap_or_else(|e| panic!("{e:#}"));
     let image = common::gpu_render(&mut renderer, spp);
     println!(
         "GPU gather {spp} spp in {:.2} s (upload included); single {:?}; peak RSS {:.0} MiB",

@@ -1,4 +1,4 @@
-//! Renewed light sets (`render.internal.resample_every`): each set's walk
+//! Renewed light sets (`render.internal.expert.resample_every`): each set's walk
 //! noise is fixed for all the passes that use it, so with one set a render
 //! converges to the image of those lights; with sets drawn afresh the
 //! passes are independent samples of the method's expectation over light
@@ -20,8 +20,8 @@ fn noisy_lights() -> Arc<Prepared> {
         s.camera.width = 16;
         s.camera.height = 16;
         let i = &mut s.render.internal;
-        i.lights = 256;
-        i.walks = 1;
+        i.knobs.lights = 256;
+        i.expert.walks = 1;
     }))
 }
 
@@ -30,7 +30,7 @@ fn render(prepared: &Arc<Prepared>, seed: u64, every: u32, spp: u32) -> Film {
     settings.method = Method::Internal;
     settings.seed = seed;
     settings.spp = spp;
-    settings.internal.resample_every = every;
+    settings.internal.expert.resample_every = every;
     lantern::cpu::render(prepared.clone(), &settings, |_| true)
 }
 
@@ -94,8 +94,8 @@ fn placement_density_is_kept_with_the_scene() {
     let prepared = common::prepare("assets/scenes/puffs_grid.ron");
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
-    settings.internal.lights = 512;
-    settings.internal.walks = 2;
+    settings.internal.knobs.lights = 512;
+    settings.internal.expert.walks = 2;
     let never = std::sync::atomic::AtomicBool::new(false);
     for set in 0..3 {
         let params = lantern::render::internal_params_for_set(&prepared, &settings, set);
@@ -130,9 +130,9 @@ fn renewals_start_every_p_passes() {
             })
             .collect::<Vec<_>>()
     };
-    settings.internal.resample_every = 0;
+    settings.internal.expert.resample_every = 0;
     assert_eq!(starts(&settings), vec![]);
-    settings.internal.resample_every = 4;
+    settings.internal.expert.resample_every = 4;
     assert_eq!(starts(&settings), vec![(4, 1), (8, 2), (12, 3)]);
     assert_eq!(lantern::render::light_set(&settings, 11), 2);
 }

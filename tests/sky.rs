@@ -383,9 +383,9 @@ fn bad_skies_are_refused_clearly() {
 #[test]
 fn internal_lights_s1_holds_the_sky() {
     let mut scene = furnace_scene(false);
-    scene.render.internal.lights = 64;
-    scene.render.internal.walks = 256;
-    scene.render.internal.view_share = 0.0;
+    scene.render.internal.knobs.lights = 64;
+    scene.render.internal.expert.walks = 256;
+    scene.render.internal.expert.view_share = 0.0;
     let prepared = Prepared::new(scene, std::path::Path::new(".")).unwrap();
     let lights = common::build_lights(&prepared, &prepared.scene.render);
     let env = prepared.lights.sky().expect("a sky");

@@ -65,23 +65,23 @@ fn moving_the_four_knobs_changes_the_settings_and_restarts_the_image() {
     h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::LIGHTS)
         .set_value_accesskit(1000.0);
     h.run_steps(2);
-    assert_eq!(h.state().doc.scene.render.internal.lights, 1000);
+    assert_eq!(h.state().doc.scene.render.internal.knobs.lights, 1000);
 
     h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::TERMS)
         .set_value_accesskit(5.0);
     h.run_steps(2);
-    assert_eq!(h.state().doc.scene.render.internal.terms, 5);
+    assert_eq!(h.state().doc.scene.render.internal.knobs.terms, 5);
 
     // s* starts automatic; unticking "auto" shows its slider.
-    assert_eq!(h.state().doc.scene.render.internal.s_star, None);
+    assert_eq!(h.state().doc.scene.render.internal.knobs.s_star, None);
     h.get_by_label(&format!("auto {}", controls::S_STAR))
         .click();
     h.run_steps(2);
-    assert_eq!(h.state().doc.scene.render.internal.s_star, Some(1.0));
+    assert_eq!(h.state().doc.scene.render.internal.knobs.s_star, Some(1.0));
     h.get_by_role_and_label(egui::accesskit::Role::Slider, controls::S_STAR)
         .set_value_accesskit(2.5);
     h.run_steps(2);
-    assert_eq!(h.state().doc.scene.render.internal.s_star, Some(2.5));
+    assert_eq!(h.state().doc.scene.render.internal.knobs.s_star, Some(2.5));
     let before = h.state().generation();
     wait_for_image(&mut h);
     assert!(h.state().generation() >= before);
@@ -195,8 +195,8 @@ fn a_clamped_medium_opens_with_a_warning_and_a_folder_is_refused() {
 #[test]
 fn split_and_error_views_render_both_estimators_and_show_the_rmse() {
     let mut h = harness();
-    h.state_mut().doc.scene.render.internal.lights = 256;
-    h.state_mut().doc.scene.render.internal.walks = 8;
+    h.state_mut().doc.scene.render.internal.knobs.lights = 256;
+    h.state_mut().doc.scene.render.internal.expert.walks = 8;
     h.run_steps(3);
     h.get_by_label("Split").click();
     h.run_steps(2);
@@ -260,9 +260,9 @@ fn the_series_term_plot_appears_with_the_internal_lights() {
         .query_by_label_contains("appears once internal lights are sampled")
         .is_some());
     h.get_by_label("Series terms").click();
-    h.state_mut().doc.scene.render.internal.lights = 256;
-    h.state_mut().doc.scene.render.internal.walks = 8;
-    h.state_mut().doc.scene.render.internal.terms = 6;
+    h.state_mut().doc.scene.render.internal.knobs.lights = 256;
+    h.state_mut().doc.scene.render.internal.expert.walks = 8;
+    h.state_mut().doc.scene.render.internal.knobs.terms = 6;
     h.state_mut().session.compare = CompareMode::Internal;
     h.run_steps(2);
     let start = Instant::now();
@@ -348,14 +348,14 @@ fn every_control_has_an_accessible_name_and_a_slider_moves_albedo() {
     h.get_by_role_and_label(egui::accesskit::Role::Slider, "K (walks per light)")
         .set_value_accesskit(32.0);
     h.run_steps(2);
-    assert_eq!(h.state().doc.scene.render.internal.walks, 32);
+    assert_eq!(h.state().doc.scene.render.internal.expert.walks, 32);
 }
 
 #[test]
 fn contributing_lights_of_the_pixel_under_the_cursor_and_f_frames_the_volume() {
     let mut h = harness();
-    h.state_mut().doc.scene.render.internal.lights = 256;
-    h.state_mut().doc.scene.render.internal.walks = 8;
+    h.state_mut().doc.scene.render.internal.knobs.lights = 256;
+    h.state_mut().doc.scene.render.internal.expert.walks = 8;
     h.state_mut().session.compare = CompareMode::Internal;
     h.state_mut().session.contributors_only = true;
     h.run_steps(2);

@@ -99,7 +99,7 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
     args.internal.apply(&mut base.internal);
     base.internal.validate(&args.scene)?;
     let resolved = internal_params(&prepared, &base);
-    base.internal.s_star = Some(resolved.s_star);
+    base.internal.knobs.s_star = Some(resolved.s_star);
 
     let mut reference_settings = base.clone();
     reference_settings.method = Method::Reference;
@@ -116,18 +116,18 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
     for &f in &args.s_factors {
         let mut s = base.clone();
         let s_star = s0 * f;
-        s.internal.s_star = Some(s_star);
-        s.internal.terms = ((span / s_star).round() as u32).saturating_sub(1);
+        s.internal.knobs.s_star = Some(s_star);
+        s.internal.knobs.terms = ((span / s_star).round() as u32).saturating_sub(1);
         runs.push(("s*", f, s));
     }
     for &n in &args.n_values {
         let mut s = base.clone();
-        s.internal.terms = n;
+        s.internal.knobs.terms = n;
         runs.push(("N", n as f32, s));
     }
     for &m in &args.m_values {
         let mut s = base.clone();
-        s.internal.lights = m;
+        s.internal.knobs.lights = m;
         runs.push(("M", m as f32, s));
     }
 
@@ -142,9 +142,9 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
         rows.push(Row {
             sweep,
             value,
-            s_star: settings.internal.s_star.unwrap_or(s0),
-            terms: settings.internal.terms,
-            lights: settings.internal.lights,
+            s_star: settings.internal.knobs.s_star.unwrap_or(s0),
+            terms: settings.internal.knobs.terms,
+            lights: settings.internal.knobs.lights,
             mean_error,
             rmse,
             resample_secs: build,
@@ -238,7 +238,7 @@ fn format_table(table: &Table<'_>) -> String {
     let _ = writeln!(
         t,
         "\n### {stem} ({w}×{h}; reference {} spp in {:.1} s; internal {} spp; base s* = {:.4}, N = {}, M = {}, K = {}, SH order {}, u = {}, clock {:?})\n",
-        args.reference_spp, ref_secs, args.spp, s0, i.terms, i.lights, i.walks, i.sh_order, i.uniform_mix, i.clock
+        args.reference_spp, ref_secs, args.spp, s0, i.knobs.terms, i.knobs.lights, i.expert.walks, i.expert.sh_order, i.expert.uniform_mix, i.expert.clock
     );
     let _ = writeln!(
         t,

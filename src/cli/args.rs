@@ -55,59 +55,70 @@ impl From<QualityArg> for Quality {
     }
 }
 
-/// Overrides of the internal-lights parameters (default: the scene's).
+/// `--help`'s heading of the artist's knobs of the internal lights.
+const KNOBS: &str = "Internal lights: the artist's knobs";
+/// `--help`'s heading of the preset.
+const PRESET: &str = "Internal lights: the preset";
+/// `--help`'s heading of the expert settings.
+const EXPERT: &str = "Internal lights: expert settings (the preset chooses them)";
+
+/// Overrides of the internal-lights parameters (default: the scene's),
+/// under `--help` headings that follow
+/// [`crate::scene::InternalSettings`]' nesting: the
+/// knobs, the preset, the expert settings.
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct InternalArgs {
-    /// Preset of the internal lights' settings: replaces the scene's, and
-    /// the flags below override it.
-    #[arg(long, value_enum)]
-    pub quality: Option<QualityArg>,
     /// Window length s* (distance, or mean free paths for the optical-depth clock).
-    #[arg(long)]
+    #[arg(long, help_heading = KNOBS)]
     pub s_star: Option<f32>,
     /// Number of internal lights M.
-    #[arg(long = "lights")]
+    #[arg(long = "lights", help_heading = KNOBS)]
     pub lights: Option<u32>,
     /// Series truncation N (terms k = 0..=N).
-    #[arg(long)]
+    #[arg(long, help_heading = KNOBS)]
     pub terms: Option<u32>,
+    /// Preset of the internal lights' settings: replaces the scene's, and
+    /// the flags of the knobs and the expert settings override
+    /// it.
+    #[arg(long, value_enum, help_heading = PRESET)]
+    pub quality: Option<QualityArg>,
     /// Time-gated walks per light K.
-    #[arg(long)]
+    #[arg(long, help_heading = EXPERT)]
     pub walks: Option<u32>,
     /// Spherical-harmonics order of F and J.
-    #[arg(long)]
+    #[arg(long, help_heading = EXPERT)]
     pub sh_order: Option<u32>,
     /// Kernel radius h (world units; default: 2.5 x the mean light spacing).
-    #[arg(long)]
+    #[arg(long, help_heading = EXPERT)]
     pub kernel_radius: Option<f32>,
     /// Uniform fraction u of the light placement.
-    #[arg(long)]
+    #[arg(long, help_heading = EXPERT)]
     pub uniform_mix: Option<f32>,
     /// What the path-length clock counts.
-    #[arg(long, value_enum)]
+    #[arg(long, value_enum, help_heading = EXPERT)]
     pub clock: Option<Clock>,
     /// The form of the gather's L1 (single scatter of the internal lights).
-    #[arg(long, value_enum)]
+    #[arg(long, value_enum, help_heading = EXPERT)]
     pub l1: Option<L1Form>,
     /// Scatterings inside the final window that the field form of L1
     /// follows (1: the note's single-scatter kernel; 2, 3: the next terms).
-    #[arg(long)]
+    #[arg(long, help_heading = EXPERT)]
     pub window_scatters: Option<u32>,
     /// Walks per light towards the camera, for the view's L0 (0: none;
     /// L0 then reads the lights' spherical harmonics).
-    #[arg(long)]
+    #[arg(long, help_heading = EXPERT)]
     pub view_walks: Option<u32>,
     /// Internal-light samples per camera sample.
-    #[arg(long)]
+    #[arg(long, help_heading = EXPERT)]
     pub light_samples: Option<u32>,
     /// Share of the lights placed in the camera rays' windows instead of
     /// by density (0..=1).
-    #[arg(long)]
+    #[arg(long, help_heading = EXPERT)]
     pub view_share: Option<f32>,
     /// Passes per set of internal lights; a fresh set (the seed's next)
     /// after each such run of passes, so the walk noise averages out
     /// (0: one set for the whole render).
-    #[arg(long)]
+    #[arg(long, help_heading = EXPERT)]
     pub resample_every: Option<u32>,
 }
 
@@ -118,46 +129,46 @@ impl InternalArgs {
             *settings = Quality::from(q).settings();
         }
         if let Some(v) = self.s_star {
-            settings.s_star = Some(v);
+            settings.knobs.s_star = Some(v);
         }
         if let Some(v) = self.lights {
-            settings.lights = v;
+            settings.knobs.lights = v;
         }
         if let Some(v) = self.terms {
-            settings.terms = v;
+            settings.knobs.terms = v;
         }
         if let Some(v) = self.walks {
-            settings.walks = v;
+            settings.expert.walks = v;
         }
         if let Some(v) = self.sh_order {
-            settings.sh_order = v;
+            settings.expert.sh_order = v;
         }
         if let Some(v) = self.kernel_radius {
-            settings.kernel_radius = Some(v);
+            settings.expert.kernel_radius = Some(v);
         }
         if let Some(v) = self.uniform_mix {
-            settings.uniform_mix = v;
+            settings.expert.uniform_mix = v;
         }
         if let Some(v) = self.clock {
-            settings.clock = v;
+            settings.expert.clock = v;
         }
         if let Some(v) = self.l1 {
-            settings.l1 = v;
+            settings.expert.l1 = v;
         }
         if let Some(v) = self.window_scatters {
-            settings.window_scatters = v;
+            settings.expert.window_scatters = v;
         }
         if let Some(v) = self.view_walks {
-            settings.view_walks = v;
+            settings.expert.view_walks = v;
         }
         if let Some(v) = self.light_samples {
-            settings.light_samples = v;
+            settings.expert.light_samples = v;
         }
         if let Some(v) = self.view_share {
-            settings.view_share = v;
+            settings.expert.view_share = v;
         }
         if let Some(v) = self.resample_every {
-            settings.resample_every = v;
+            settings.expert.resample_every = v;
         }
     }
 }

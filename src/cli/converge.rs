@@ -450,17 +450,17 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
     let _ = writeln!(
         report,
         "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}, {} window scattering(s), {} view walks, {}\n",
-        i.lights,
-        i.walks,
-        i.terms,
-        i.s_star
+        i.knobs.lights,
+        i.expert.walks,
+        i.knobs.terms,
+        i.knobs.s_star
             .map_or("scene default".to_owned(), |s| s.to_string()),
-        i.sh_order,
-        i.clock,
-        i.l1,
-        i.window_scatters,
-        i.view_walks,
-        renewal_text(i.resample_every)
+        i.expert.sh_order,
+        i.expert.clock,
+        i.expert.l1,
+        i.expert.window_scatters,
+        i.expert.view_walks,
+        renewal_text(i.expert.resample_every)
     );
     let _ = writeln!(
         report,

@@ -354,15 +354,15 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
     let _ = writeln!(
         md,
         "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}, {} light sample(s), {}\n",
-        i.lights,
-        i.walks,
-        i.terms,
-        i.s_star.map_or("auto".to_owned(), |s| s.to_string()),
-        i.sh_order,
-        i.clock,
-        i.l1,
-        i.light_samples,
-        renewal_text(i.resample_every)
+        i.knobs.lights,
+        i.expert.walks,
+        i.knobs.terms,
+        i.knobs.s_star.map_or("auto".to_owned(), |s| s.to_string()),
+        i.expert.sh_order,
+        i.expert.clock,
+        i.expert.l1,
+        i.expert.light_samples,
+        renewal_text(i.expert.resample_every)
     );
     let _ = writeln!(
         md,

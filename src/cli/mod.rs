@@ -185,7 +185,7 @@ mod tests {
         assert_eq!(meta_value(&meta, "lantern/method"), "internal");
         let internal: InternalSettings =
             ron::from_str(meta_value(&meta, "lantern/internal")).unwrap();
-        assert_eq!((internal.lights, internal.walks), (256, 4));
+        assert_eq!((internal.knobs.lights, internal.expert.walks), (256, 4));
         assert!(meta_value(&meta, "lantern/s_star").parse::<f32>().unwrap() > 0.0);
     }
 }

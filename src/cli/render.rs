@@ -278,7 +278,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if method == Method::Internal && sets > 0 {
         println!(
             "{sets} more light sets (one every {} passes), walked within the render time below",
-            settings.internal.resample_every
+            settings.internal.expert.resample_every
         );
     }
     let secs = start.elapsed().as_secs_f64();
@@ -469,7 +469,7 @@ fn render_gpu(
     if sets > 0 {
         println!(
             "{sets} more light sets (one every {} passes) walked in {resample_secs:.2} s, included below",
-            settings.internal.resample_every
+            settings.internal.expert.resample_every
         );
     }
     let secs = start.elapsed().as_secs_f64();

@@ -67,7 +67,7 @@ pub fn gpu_renderer(
                 ctx,
                 prepared,
                 &lights,
-                settings.internal.light_samples,
+                settings.internal.expert.light_samples,
                 settings.seed,
             )?;
             Ok((renderer, Some(lights.timings)))

@@ -155,7 +155,7 @@ fn part_noise(
                     &cache,
                     cam.eye,
                     dir,
-                    settings.internal.light_samples,
+                    settings.internal.expert.light_samples,
                     &mut rng,
                 )
             })
@@ -342,12 +342,12 @@ pub fn format_report(
         "\n### {name} {}×{}: noise of the internal lights (M {}, K {}, N {}, s* {}, SH order {}, {} light samples)\n",
         size.0,
         size.1,
-        i.lights,
-        i.walks,
-        i.terms,
-        i.s_star.map_or("scene default".to_owned(), |v| v.to_string()),
-        i.sh_order,
-        i.light_samples
+        i.knobs.lights,
+        i.expert.walks,
+        i.knobs.terms,
+        i.knobs.s_star.map_or("scene default".to_owned(), |v| v.to_string()),
+        i.expert.sh_order,
+        i.expert.light_samples
     );
     let _ = writeln!(
         s,

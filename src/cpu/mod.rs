@@ -145,7 +145,7 @@ impl Renderer {
                     cache,
                     p.camera.eye,
                     dir,
-                    self.settings.internal.light_samples,
+                    self.settings.internal.expert.light_samples,
                     rng,
                 );
                 (s.total(), s.single)

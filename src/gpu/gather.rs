@@ -148,7 +148,7 @@ impl GpuRenderer {
 
     /// Gathers the passes still to come from another set of internal
     /// lights of the same scene and parameters (a renewed light set, see
-    /// `InternalSettings::resample_every`), keeping what has accumulated.
+    /// `Expert::resample_every`), keeping what has accumulated.
     pub fn set_internal_lights(
         &mut self,
         cache: &InternalLights,

@@ -168,14 +168,14 @@ pub fn warnings(prepared: &Prepared, settings: &RenderSettings) -> Vec<String> {
 
 fn internal_warnings(prepared: &Prepared, settings: &RenderSettings, out: &mut Vec<String>) {
     let s = &settings.internal;
-    let walks = u64::from(s.lights) * u64::from(s.walks);
+    let walks = u64::from(s.knobs.lights) * u64::from(s.expert.walks);
     if walks > MANY_WALKS {
         out.push(format!(
             "render.internal: M × K = {} × {} = {walks:.3e} gated walks per light set (each up \
              to N + 1 = {} windows): about {} to build at {WALKS_PER_SECOND:.0e} walks/s",
-            s.lights,
-            s.walks,
-            s.terms + 1,
+            s.knobs.lights,
+            s.expert.walks,
+            s.knobs.terms + 1,
             duration(walks as f64 / WALKS_PER_SECOND)
         ));
     }
@@ -196,28 +196,28 @@ fn internal_warnings(prepared: &Prepared, settings: &RenderSettings, out: &mut V
     };
     if length < voxel / WINDOW_RATIO {
         out.push(format!(
-            "render.internal.s_star: the window s* = {s_star:e} {unit} spans about {length:.3e} \
+            "render.internal.knobs.s_star: the window s* = {s_star:e} {unit} spans about {length:.3e} \
              world units, far shorter than a voxel ({voxel:.3e}): the series then needs \
              N ≈ {:.1e} terms to reach across the medium and the image is nearly black",
             (diagonal / length).min(1e30)
         ));
     } else if length > WINDOW_RATIO * diagonal {
         out.push(format!(
-            "render.internal.s_star: the window s* = {s_star:e} {unit} spans about {length:.3e} \
+            "render.internal.knobs.s_star: the window s* = {s_star:e} {unit} spans about {length:.3e} \
              world units, far longer than the medium's diagonal ({diagonal:.3e}): no light \
              reaches the next window, so the internal lights carry nothing"
         ));
     }
-    if let Some(h) = s.kernel_radius {
+    if let Some(h) = s.expert.kernel_radius {
         if h > diagonal {
             out.push(format!(
-                "render.internal.kernel_radius: h = {h:e} is wider than the medium's diagonal \
+                "render.internal.expert.kernel_radius: h = {h:e} is wider than the medium's diagonal \
                  ({diagonal:.3e}): every light is spread over the whole medium and the image \
                  loses its detail (and nearly all its multiple scatter for h ≫ the medium)"
             ));
         } else if h < voxel / WINDOW_RATIO {
             out.push(format!(
-                "render.internal.kernel_radius: h = {h:e} is far smaller than a voxel \
+                "render.internal.expert.kernel_radius: h = {h:e} is far smaller than a voxel \
                  ({voxel:.3e}): almost no light falls within its kernel and the image is noisy \
                  or black"
             ));

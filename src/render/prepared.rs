@@ -391,10 +391,10 @@ pub fn internal_params(prepared: &Prepared, settings: &RenderSettings) -> Intern
 }
 
 /// Which set of internal lights renders pass `pass` (see
-/// `InternalSettings::resample_every`): 0 throughout when sets are not
+/// `Expert::resample_every`): 0 throughout when sets are not
 /// renewed.
 pub fn light_set(settings: &RenderSettings, pass: u32) -> u32 {
-    match settings.internal.resample_every {
+    match settings.internal.expert.resample_every {
         0 => 0,
         every => pass / every,
     }
@@ -403,7 +403,7 @@ pub fn light_set(settings: &RenderSettings, pass: u32) -> u32 {
 /// The later light set that begins at pass `pass`, if one does: where a
 /// progressive loop over passes `0, 1, …` renews its lights.
 pub fn light_set_starting(settings: &RenderSettings, pass: u32) -> Option<u32> {
-    let every = settings.internal.resample_every;
+    let every = settings.internal.expert.resample_every;
     (every > 0 && pass > 0 && pass.is_multiple_of(every)).then(|| pass / every)
 }
 
@@ -417,33 +417,34 @@ pub fn internal_params_for_set(
     set: u32,
 ) -> InternalParams {
     let s = &settings.internal;
-    let clock = s.clock;
+    let clock = s.expert.clock;
     let s_star = s
+        .knobs
         .s_star
         .unwrap_or_else(|| default_s_star(&prepared.volume, clock));
     InternalParams {
         s_star,
-        lights: s.lights as usize,
-        terms: s.terms,
-        walks: s.walks,
-        sh_order: s.sh_order,
-        kernel_radius: s.kernel_radius,
-        uniform_mix: s.uniform_mix,
+        lights: s.knobs.lights as usize,
+        terms: s.knobs.terms,
+        walks: s.expert.walks,
+        sh_order: s.expert.sh_order,
+        kernel_radius: s.expert.kernel_radius,
+        uniform_mix: s.expert.uniform_mix,
         clock,
-        l1: s.l1,
-        window_scatters: s.window_scatters,
-        view_walks: s.view_walks,
+        l1: s.expert.l1,
+        window_scatters: s.expert.window_scatters,
+        view_walks: s.expert.view_walks,
         // Only the view walks tie the lights to the camera: without them
         // moving the camera must not re-sample the lights.
-        eye: if s.view_walks > 0 || s.view_share > 0.0 {
+        eye: if s.expert.view_walks > 0 || s.expert.view_share > 0.0 {
             prepared.camera.eye
         } else {
             glam::Vec3::ZERO
         },
-        view_share: s.view_share,
+        view_share: s.expert.view_share,
         // Like the eye: only lights placed in the camera's windows depend
         // on the rest of the camera.
-        view_frame: if s.view_share > 0.0 {
+        view_frame: if s.expert.view_share > 0.0 {
             let f = prepared.camera;
             ViewFrame {
                 eye: f.eye,

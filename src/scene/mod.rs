@@ -466,65 +466,72 @@ impl InternalSettings {
                 reason,
             ))
         };
-        if let Some(s) = self.s_star {
+        if let Some(s) = self.knobs.s_star {
             if !(s.is_finite() && s > 0.0) {
                 return bad("s_star", format!("{s} must be finite and positive"));
             }
         }
-        if self.lights == 0 || self.lights > MAX_INTERNAL_LIGHTS {
+        if self.knobs.lights == 0 || self.knobs.lights > MAX_INTERNAL_LIGHTS {
             return bad(
                 "lights",
-                format!("M = {} must lie in 1..={MAX_INTERNAL_LIGHTS}", self.lights),
+                format!(
+                    "M = {} must lie in 1..={MAX_INTERNAL_LIGHTS}",
+                    self.knobs.lights
+                ),
             );
         }
-        if self.terms > MAX_TERMS {
-            return bad("terms", format!("N = {} exceeds {MAX_TERMS}", self.terms));
+        if self.knobs.terms > MAX_TERMS {
+            return bad(
+                "terms",
+                format!("N = {} exceeds {MAX_TERMS}", self.knobs.terms),
+            );
         }
-        if self.walks == 0 || self.walks > MAX_WALKS {
+        if self.expert.walks == 0 || self.expert.walks > MAX_WALKS {
             return bad(
                 "walks",
-                format!("K = {} must lie in 1..={MAX_WALKS}", self.walks),
+                format!("K = {} must lie in 1..={MAX_WALKS}", self.expert.walks),
             );
         }
-        if self.sh_order > settings::MAX_SH_ORDER {
+        if self.expert.sh_order > settings::MAX_SH_ORDER {
             return bad(
                 "sh_order",
                 format!(
                     "{} exceeds the highest supported order {}",
-                    self.sh_order,
+                    self.expert.sh_order,
                     settings::MAX_SH_ORDER
                 ),
             );
         }
-        if let Some(h) = self.kernel_radius {
+        if let Some(h) = self.expert.kernel_radius {
             if !(h.is_finite() && h > 0.0) {
                 return bad("kernel_radius", format!("{h} must be finite and positive"));
             }
         }
-        if !(self.uniform_mix.is_finite() && (0.0..=1.0).contains(&self.uniform_mix)) {
+        if !(self.expert.uniform_mix.is_finite() && (0.0..=1.0).contains(&self.expert.uniform_mix))
+        {
             return bad(
                 "uniform_mix",
-                format!("{} must lie in [0, 1]", self.uniform_mix),
+                format!("{} must lie in [0, 1]", self.expert.uniform_mix),
             );
         }
         let most = settings::MAX_GATHER_POINTS as u32;
-        if self.light_samples == 0 || self.light_samples > most {
+        if self.expert.light_samples == 0 || self.expert.light_samples > most {
             return bad(
                 "light_samples",
-                format!("{} must lie in 1..={most}", self.light_samples),
+                format!("{} must lie in 1..={most}", self.expert.light_samples),
             );
         }
-        if self.view_walks > MAX_WALKS {
+        if self.expert.view_walks > MAX_WALKS {
             return bad(
                 "view_walks",
-                format!("{} must lie in 0..={MAX_WALKS}", self.view_walks),
+                format!("{} must lie in 0..={MAX_WALKS}", self.expert.view_walks),
             );
         }
         let most = settings::MAX_WINDOW_SCATTERS;
-        if self.window_scatters == 0 || self.window_scatters > most {
+        if self.expert.window_scatters == 0 || self.expert.window_scatters > most {
             return bad(
                 "window_scatters",
-                format!("{} must lie in 1..={most}", self.window_scatters),
+                format!("{} must lie in 1..={most}", self.expert.window_scatters),
             );
         }
         Ok(())

@@ -73,18 +73,30 @@ impl L1Form {
     }
 }
 
-/// Parameters of the internal-lights method. Changing any of them
-/// re-samples the internal lights.
+/// Parameters of the internal-lights method, nested by who sets them: the
+/// artist's [`Knobs`] first, then the preset and the [`Expert`] settings it
+/// chooses. Changing any of them re-samples the internal lights.
 ///
-/// In a scene file every field is optional: the ones given override the
+/// In a scene file the fields are written flat (`render.internal.expert.walks`,
+/// as always) and every one is optional: the ones given override the
 /// preset named by `quality` (default [`Quality::Final`]), the others come
 /// from it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(from = "InternalSettingsFile")]
+#[serde(from = "InternalSettingsFile", into = "InternalSettingsFlat")]
 pub struct InternalSettings {
-    /// The preset the other fields started from (see [`Quality`]); the
+    /// The artist's knobs: the window, the number of lights and the series
+    /// truncation (the fourth, the phase function's `g`, is the medium's).
+    pub knobs: Knobs,
+    /// The preset the expert settings started from (see [`Quality`]); the
     /// fields may have been edited since.
     pub quality: Quality,
+    /// How the estimator spends its work: what the presets choose.
+    pub expert: Expert,
+}
+
+/// The internal lights' knobs an artist turns ([method §3–§5](crate::doc::method)).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Knobs {
     /// Window length `s*` (world units for the geometric clock, mean free
     /// paths for the optical-depth clock); `None`: [`DEFAULT_S_STAR`] mean
     /// free paths (for the geometric clock, that many mean free paths at
@@ -94,6 +106,14 @@ pub struct InternalSettings {
     pub lights: u32,
     /// Series truncation `N`: terms `k = 0..=N`.
     pub terms: u32,
+}
+
+/// The internal lights' expert settings: the walks, the lights' harmonics
+/// and kernel, the clock, the gather and the light sets' renewal. The
+/// presets ([`Quality`]) choose them; the previewer shows them in its
+/// expert section and the command line under its own heading.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Expert {
     /// Time-gated walks per light `K`.
     pub walks: u32,
     /// Order of the real spherical harmonics that store `F` and `J`.
@@ -142,7 +162,7 @@ impl Default for InternalSettings {
 }
 
 /// The default window `s*` in mean free paths. The final gather follows
-/// at most [`InternalSettings::window_scatters`] scatterings inside the
+/// at most [`Expert::window_scatters`] scatterings inside the
 /// window, and a window of `s*` mean free paths holds more with the
 /// Poisson probability `P(n > m)`: at 0.5 with two scatterings 1.4 %, the
 /// bias's bound; 0.25 doubles every walk's gates for 1.2 % less.
@@ -168,11 +188,12 @@ impl Quality {
 
     /// The settings of this preset.
     pub fn settings(self) -> InternalSettings {
-        let final_ = InternalSettings {
-            quality: self,
+        let knobs = Knobs {
             s_star: None,
             lights: 4096,
             terms: 256,
+        };
+        let expert = Expert {
             walks: 16,
             sh_order: 3,
             kernel_radius: None,
@@ -186,14 +207,24 @@ impl Quality {
             resample_every: 2,
         };
         match self {
-            Quality::Final => final_,
+            Quality::Final => InternalSettings {
+                knobs,
+                quality: self,
+                expert,
+            },
             Quality::Preview => InternalSettings {
-                lights: 2048,
-                walks: 8,
-                view_walks: 8,
-                light_samples: 2,
-                resample_every: 4,
-                ..final_
+                knobs: Knobs {
+                    lights: 2048,
+                    ..knobs
+                },
+                quality: self,
+                expert: Expert {
+                    walks: 8,
+                    view_walks: 8,
+                    light_samples: 2,
+                    resample_every: 4,
+                    ..expert
+                },
             },
         }
     }
@@ -259,22 +290,71 @@ where
 impl From<InternalSettingsFile> for InternalSettings {
     fn from(f: InternalSettingsFile) -> Self {
         let p = f.quality.unwrap_or_default().settings();
+        let (k, e) = (p.knobs, p.expert);
         InternalSettings {
+            knobs: Knobs {
+                s_star: f.s_star.unwrap_or(k.s_star),
+                lights: f.lights.unwrap_or(k.lights),
+                terms: f.terms.unwrap_or(k.terms),
+            },
             quality: p.quality,
-            s_star: f.s_star.unwrap_or(p.s_star),
-            lights: f.lights.unwrap_or(p.lights),
-            terms: f.terms.unwrap_or(p.terms),
-            walks: f.walks.unwrap_or(p.walks),
-            sh_order: f.sh_order.unwrap_or(p.sh_order),
-            kernel_radius: f.kernel_radius.unwrap_or(p.kernel_radius),
-            uniform_mix: f.uniform_mix.unwrap_or(p.uniform_mix),
-            clock: f.clock.unwrap_or(p.clock),
-            l1: f.l1.unwrap_or(p.l1),
-            window_scatters: f.window_scatters.unwrap_or(p.window_scatters),
-            view_walks: f.view_walks.unwrap_or(p.view_walks),
-            light_samples: f.light_samples.unwrap_or(p.light_samples),
-            view_share: f.view_share.unwrap_or(p.view_share),
-            resample_every: f.resample_every.unwrap_or(p.resample_every),
+            expert: Expert {
+                walks: f.walks.unwrap_or(e.walks),
+                sh_order: f.sh_order.unwrap_or(e.sh_order),
+                kernel_radius: f.kernel_radius.unwrap_or(e.kernel_radius),
+                uniform_mix: f.uniform_mix.unwrap_or(e.uniform_mix),
+                clock: f.clock.unwrap_or(e.clock),
+                l1: f.l1.unwrap_or(e.l1),
+                window_scatters: f.window_scatters.unwrap_or(e.window_scatters),
+                view_walks: f.view_walks.unwrap_or(e.view_walks),
+                light_samples: f.light_samples.unwrap_or(e.light_samples),
+                view_share: f.view_share.unwrap_or(e.view_share),
+                resample_every: f.resample_every.unwrap_or(e.resample_every),
+            },
+        }
+    }
+}
+
+/// [`InternalSettings`] as a scene file is written: flat, every field
+/// given, in the order the file format has always had.
+#[derive(Serialize)]
+struct InternalSettingsFlat {
+    quality: Quality,
+    s_star: Option<f32>,
+    lights: u32,
+    terms: u32,
+    walks: u32,
+    sh_order: u32,
+    kernel_radius: Option<f32>,
+    uniform_mix: f32,
+    clock: Clock,
+    l1: L1Form,
+    window_scatters: u32,
+    view_walks: u32,
+    light_samples: u32,
+    view_share: f32,
+    resample_every: u32,
+}
+
+impl From<InternalSettings> for InternalSettingsFlat {
+    fn from(s: InternalSettings) -> Self {
+        let (k, e) = (s.knobs, s.expert);
+        InternalSettingsFlat {
+            quality: s.quality,
+            s_star: k.s_star,
+            lights: k.lights,
+            terms: k.terms,
+            walks: e.walks,
+            sh_order: e.sh_order,
+            kernel_radius: e.kernel_radius,
+            uniform_mix: e.uniform_mix,
+            clock: e.clock,
+            l1: e.l1,
+            window_scatters: e.window_scatters,
+            view_walks: e.view_walks,
+            light_samples: e.light_samples,
+            view_share: e.view_share,
+            resample_every: e.resample_every,
         }
     }
 }
@@ -339,23 +419,31 @@ mod tests {
         assert_eq!(parse("(quality: Preview)"), Quality::Preview.settings());
         let edited =
             parse("(quality: Preview, walks: 64, s_star: Some(0.25), kernel_radius: None)");
-        assert_eq!(
-            edited,
-            InternalSettings {
-                walks: 64,
-                s_star: Some(0.25),
-                ..Quality::Preview.settings()
-            }
-        );
+        assert_eq!(edited, {
+            let mut want = Quality::Preview.settings();
+            want.expert.walks = 64;
+            want.knobs.s_star = Some(0.25);
+            want
+        });
         // Files written before the presets: every field plain, as before.
         let old = parse("(s_star: None, lights: 1024, terms: 16, walks: 64, view_walks: 0)");
         assert_eq!(
-            (old.lights, old.terms, old.walks, old.view_walks),
+            (
+                old.knobs.lights,
+                old.knobs.terms,
+                old.expert.walks,
+                old.expert.view_walks
+            ),
             (1024, 16, 64, 0)
         );
         assert_eq!(old.quality, Quality::Final);
         let text = ron::to_string(&edited).unwrap();
         assert_eq!(parse(&text), edited);
+        // Written flat, as the format has always been.
+        assert!(
+            text.contains("walks:64") && !text.contains("expert"),
+            "{text}"
+        );
         assert!(ron::from_str::<InternalSettings>("(walkz: 3)").is_err());
     }
 
@@ -363,8 +451,11 @@ mod tests {
     #[test]
     fn preview_does_less_work_than_final() {
         let (p, f) = (Quality::Preview.settings(), Quality::Final.settings());
-        assert!(p.walks < f.walks && p.view_walks < f.view_walks);
-        assert!(p.light_samples < f.light_samples && p.lights < f.lights);
-        assert_eq!((p.s_star, p.terms, p.clock), (f.s_star, f.terms, f.clock));
+        assert!(p.expert.walks < f.expert.walks && p.expert.view_walks < f.expert.view_walks);
+        assert!(p.expert.light_samples < f.expert.light_samples && p.knobs.lights < f.knobs.lights);
+        assert_eq!(
+            (p.knobs.s_star, p.knobs.terms, p.expert.clock),
+            (f.knobs.s_star, f.knobs.terms, f.expert.clock)
+        );
     }
 }

@@ -105,7 +105,7 @@ pub fn renew_gpu_lights(
         },
         LightBuilder::Gpu(ctx) => build_internal_lights_gpu(ctx, prepared, &params)?,
     };
-    renderer.set_internal_lights(&lights, settings.internal.light_samples)?;
+    renderer.set_internal_lights(&lights, settings.internal.expert.light_samples)?;
     Ok(Renewal::Renewed(set))
 }
 

@@ -466,16 +466,16 @@ impl LightsCache {
         // walks' eye (`InternalParams::eye`) and, for the lights placed in
         // the camera's windows, the whole camera (`InternalParams::view_frame`).
         let camera = std::mem::take(&mut scene.camera);
-        if scene.render.internal.view_share > 0.0 {
+        if scene.render.internal.expert.view_share > 0.0 {
             scene.camera = camera;
-        } else if scene.render.internal.view_walks > 0 {
+        } else if scene.render.internal.expert.view_walks > 0 {
             scene.camera.eye = camera.eye;
         }
         scene.render.spp = 0;
         scene.render.method = Method::Internal;
         // Light set 0 does not depend on whether or how often later sets
         // replace it.
-        scene.render.internal.resample_every = 0;
+        scene.render.internal.expert.resample_every = 0;
         (scene, job.scene_dir.clone())
     }
 }
@@ -693,9 +693,12 @@ impl JobContext<'_> {
         } else {
             let settings = settings_for(job, Method::Internal);
             let mut coarse_settings = settings.clone();
-            coarse_settings.internal.lights = settings.internal.lights.min(COARSE_LIGHTS);
-            coarse_settings.internal.walks = settings.internal.walks.min(COARSE_WALKS);
-            coarse_settings.internal.view_walks = settings.internal.view_walks.min(COARSE_WALKS);
+            coarse_settings.internal.knobs.lights =
+                settings.internal.knobs.lights.min(COARSE_LIGHTS);
+            coarse_settings.internal.expert.walks =
+                settings.internal.expert.walks.min(COARSE_WALKS);
+            coarse_settings.internal.expert.view_walks =
+                settings.internal.expert.view_walks.min(COARSE_WALKS);
             let is_coarse = coarse_settings != settings;
             if is_coarse {
                 let t = Instant::now();
@@ -886,7 +889,7 @@ fn gpu_engines(
                         ctx,
                         prepared,
                         lights,
-                        settings.internal.light_samples,
+                        settings.internal.expert.light_samples,
                         settings.seed,
                     )?
                 }
@@ -1113,8 +1116,8 @@ mod tests {
     fn job(eye: Vec3, view_walks: u32) -> Job {
         let mut scene = Scene::default();
         scene.camera.eye = eye;
-        scene.render.internal.view_walks = view_walks;
-        scene.render.internal.view_share = 0.0;
+        scene.render.internal.expert.view_walks = view_walks;
+        scene.render.internal.expert.view_share = 0.0;
         Job {
             scene,
             scene_dir: PathBuf::from("."),
@@ -1139,7 +1142,7 @@ mod tests {
     fn lights_cache_follows_the_camera_with_lights_in_view() {
         let in_view = |eye: Vec3, fov: f32| {
             let mut j = job(eye, 0);
-            j.scene.render.internal.view_share = 0.5;
+            j.scene.render.internal.expert.view_share = 0.5;
             j.scene.camera.fov_y_deg = fov;
             LightsCache::key_of(&j)
         };

@@ -148,7 +148,7 @@ fn method_knobs_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     optional_log_ui(
         ui,
         S_STAR,
-        &mut internal.s_star,
+        &mut internal.knobs.s_star,
         0.01..=100.0,
         1.0,
         "Window length s*: the path length after which multiply scattered light \
@@ -160,7 +160,7 @@ fn method_knobs_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
          path.",
     );
     ui.add(
-        Slider::new(&mut internal.lights, 16..=262_144)
+        Slider::new(&mut internal.knobs.lights, 16..=262_144)
             .logarithmic(true)
             .text(LIGHTS),
     )
@@ -177,7 +177,7 @@ fn method_knobs_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              scattering angle.",
         );
     ui.add(
-        Slider::new(&mut internal.terms, 0..=512)
+        Slider::new(&mut internal.knobs.terms, 0..=512)
             .logarithmic(true)
             .text(TERMS),
     )
@@ -202,9 +202,9 @@ fn method_knobs_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              settings; s*, M and N keep their values.",
         );
     if quality != internal.quality {
-        let keep = (internal.s_star, internal.lights, internal.terms);
-        *internal = quality.settings();
-        (internal.s_star, internal.lights, internal.terms) = keep;
+        // The preset's expert settings; the knobs stay as they are.
+        internal.quality = quality;
+        internal.expert = quality.settings().expert;
     }
 }
 
@@ -264,7 +264,7 @@ fn medium_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
 fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     let s = &mut app.doc.scene.render.internal;
     ui.add(
-        Slider::new(&mut s.walks, 1..=4096)
+        Slider::new(&mut s.expert.walks, 1..=4096)
             .logarithmic(true)
             .text("K (walks per light)"),
     )
@@ -273,7 +273,7 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
          between lights, slower re-sampling. Each walk estimates all N+1 terms of \
          J at the light without bias.",
     );
-    ui.add(Slider::new(&mut s.sh_order, 0..=MAX_ORDER).text("SH order"))
+    ui.add(Slider::new(&mut s.expert.sh_order, 0..=MAX_ORDER).text("SH order"))
         .on_hover_text(
             "Spherical-harmonic order of each light's angular lobe. 0: every light \
              glows the same in all directions; higher orders keep the forward peak \
@@ -282,27 +282,27 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
     optional_log_ui(
         ui,
         "h (kernel radius)",
-        &mut s.kernel_radius,
+        &mut s.expert.kernel_radius,
         0.001..=10.0,
         0.05,
         "Kernel radius h that spreads each light's J along camera rays. Small: \
          sharp, blotchy glowing spots; large: smooth but blurred glow (bias). \
          Auto: the mean spacing of the lights.",
     );
-    ui.add(Slider::new(&mut s.uniform_mix, 0.0..=1.0).text("u (uniform mix)"))
+    ui.add(Slider::new(&mut s.expert.uniform_mix, 0.0..=1.0).text("u (uniform mix)"))
         .on_hover_text(
             "Fraction u of lights placed uniformly in the box rather than by \
              density. Raise it when light in flight through gaps between puffs \
              (J in empty space) goes missing.",
         );
     egui::ComboBox::from_label("clock")
-        .selected_text(match s.clock {
+        .selected_text(match s.expert.clock {
             Clock::Geometric => "geometric",
             Clock::OpticalDepth => "optical depth",
         })
         .show_ui(ui, |ui| {
-            ui.selectable_value(&mut s.clock, Clock::OpticalDepth, "optical depth");
-            ui.selectable_value(&mut s.clock, Clock::Geometric, "geometric");
+            ui.selectable_value(&mut s.expert.clock, Clock::OpticalDepth, "optical depth");
+            ui.selectable_value(&mut s.expert.clock, Clock::Geometric, "geometric");
         })
         .response
         .on_hover_text(
@@ -311,13 +311,13 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              parts alike. Geometric: s* is a distance, as in Tessendorf's note.",
         );
     egui::ComboBox::from_label("L₁ form")
-        .selected_text(match s.l1 {
+        .selected_text(match s.expert.l1 {
             L1Form::Field => "field",
             L1Form::Points => "point lights",
         })
         .show_ui(ui, |ui| {
-            ui.selectable_value(&mut s.l1, L1Form::Field, "field");
-            ui.selectable_value(&mut s.l1, L1Form::Points, "point lights");
+            ui.selectable_value(&mut s.expert.l1, L1Form::Field, "field");
+            ui.selectable_value(&mut s.expert.l1, L1Form::Points, "point lights");
         })
         .response
         .on_hover_text(
@@ -328,7 +328,7 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              small s*.",
         );
     let most = crate::physics::internal::sources::MAX_WINDOW_SCATTERS;
-    ui.add(Slider::new(&mut s.window_scatters, 1..=most).text("window scatterings"))
+    ui.add(Slider::new(&mut s.expert.window_scatters, 1..=most).text("window scatterings"))
         .on_hover_text(
             "Scatterings inside the final window s* that the field L₁ follows. 1: \
              Tessendorf's single-scatter kernel, which misses light scattered twice \
@@ -336,7 +336,7 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              media). 2 and 3: the next terms, for longer passes; on the puffs at \
              s* 0.5 two took the bias from 4.7 % to 1.9 %.",
         );
-    ui.add(Slider::new(&mut s.view_walks, 0..=64).text("view walks"))
+    ui.add(Slider::new(&mut s.expert.view_walks, 0..=64).text("view walks"))
         .on_hover_text(
             "Walks per light towards the camera. The camera sees the multiply \
              scattered light in one direction; walks aimed there estimate it with \
@@ -345,7 +345,7 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              the harmonics, as in Tessendorf's note. With view walks, moving the \
              camera re-samples the lights.",
         );
-    ui.add(Slider::new(&mut s.view_share, 0.0..=1.0).text("lights in view"))
+    ui.add(Slider::new(&mut s.expert.view_share, 0.0..=1.0).text("lights in view"))
         .on_hover_text(
             "Share of the lights placed where the camera reads them: in the first \
              s* of each camera ray inside the medium. The rest are placed by \
@@ -354,13 +354,13 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              the image goes dark and blotchy without this. Moving the camera \
              re-samples the lights.",
         );
-    ui.add(Slider::new(&mut s.light_samples, 1..=64).text("light samples"))
+    ui.add(Slider::new(&mut s.expert.light_samples, 1..=64).text("light samples"))
         .on_hover_text(
             "Internal lights gathered per camera sample. More: less noise per pass, \
              slower passes.",
         );
     ui.add(
-        Slider::new(&mut s.resample_every, 0..=1024)
+        Slider::new(&mut s.expert.resample_every, 0..=1024)
             .logarithmic(true)
             .text("renew lights every"),
     )

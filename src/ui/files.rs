@@ -356,13 +356,13 @@ pub fn render_metadata(doc: &Document) -> Vec<(String, String)> {
     vec![
         (
             "lantern/s_star".into(),
-            i.s_star.map_or("auto".into(), |v| v.to_string()),
+            i.knobs.s_star.map_or("auto".into(), |v| v.to_string()),
         ),
-        ("lantern/M".into(), i.lights.to_string()),
+        ("lantern/M".into(), i.knobs.lights.to_string()),
         ("lantern/g".into(), s.medium.g.to_string()),
-        ("lantern/N".into(), i.terms.to_string()),
-        ("lantern/K".into(), i.walks.to_string()),
-        ("lantern/sh_order".into(), i.sh_order.to_string()),
+        ("lantern/N".into(), i.knobs.terms.to_string()),
+        ("lantern/K".into(), i.expert.walks.to_string()),
+        ("lantern/sh_order".into(), i.expert.sh_order.to_string()),
         ("lantern/seed".into(), s.render.seed.to_string()),
     ]
 }
