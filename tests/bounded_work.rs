@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use glam::{UVec3, Vec3};
 use lantern::physics::lights::{Lights, PointLight};
-use lantern::render::Prepared;
+use lantern::render::PreparedScene;
 use lantern::scene::{Density, Light, Method, Scene, VoxelGrid};
 
 /// Runs `f` on a thread and fails if it takes longer than `secs`.
@@ -68,7 +68,7 @@ fn one_dense_voxel(value: f32) -> Density {
 }
 
 /// The image mean of `spp` passes of `method`.
-fn image_mean(prepared: Prepared, method: Method, spp: u32) -> Vec3 {
+fn image_mean(prepared: PreparedScene, method: Method, spp: u32) -> Vec3 {
     let film = common::render(&Arc::new(prepared), method, 3, spp);
     film.image_mean()
 }
@@ -88,7 +88,7 @@ fn a_far_point_light_does_not_hang() {
             s.render.internal.expert.walks = 8;
         });
         let mean = within(20.0, &format!("far light, {method:?}"), move || {
-            let prepared = Prepared::new(scene, Path::new(".")).unwrap();
+            let prepared = PreparedScene::new(scene, Path::new(".")).unwrap();
             image_mean(prepared, method, 1)
         });
         assert!(mean.min_element() > 0.0, "{method:?}: {mean}");
@@ -137,7 +137,7 @@ fn far_point_lights_deliver_their_inverse_square_irradiance() {
 /// One voxel of 10⁶ (and of 10⁸) in an 8³ grid: tracking took
 /// `σ_t · length` null collisions per ray (19 s, and over 25 s, instead of
 /// 0.02 s). Now clamped to `MAX_DEPTH_PER_VOXEL`, both methods finish at
-/// once, the voxel is seen, and `Prepared::dense` says what was done.
+/// once, the voxel is seen, and `PreparedScene::dense` says what was done.
 #[test]
 fn a_dense_voxel_renders_at_once() {
     for value in [1e6f32, 1e8] {
@@ -150,7 +150,7 @@ fn a_dense_voxel_renders_at_once() {
                     s.render.internal.expert.walks = 8;
                 });
                 scene.render.method = method;
-                let prepared = Prepared::with_density(scene, one_dense_voxel(value));
+                let prepared = PreparedScene::with_density(scene, one_dense_voxel(value));
                 let note = prepared.dense.expect("the clamp is reported");
                 assert!(note.peak >= value as f64 && note.limit < note.peak);
                 assert!(note.to_string().contains("opaque"), "{note}");
@@ -169,7 +169,7 @@ fn a_dense_voxel_renders_at_once() {
 fn an_extreme_density_scale_renders_as_an_opaque_surface() {
     let render = |scale: f32| {
         let scene = scene_with(|s| s.medium.density_scale = scale);
-        let prepared = Prepared::new(scene, Path::new(".")).unwrap();
+        let prepared = PreparedScene::new(scene, Path::new(".")).unwrap();
         image_mean(prepared, Method::Reference, 64)
     };
     let dense = within(30.0, "density_scale 1e20", move || render(1e20));
@@ -188,7 +188,7 @@ fn an_extreme_density_scale_renders_as_an_opaque_surface() {
 #[test]
 fn media_within_the_limit_are_untouched() {
     let scene = scene_with(|_| {});
-    let p = Prepared::with_density(scene, one_dense_voxel(10.0));
+    let p = PreparedScene::with_density(scene, one_dense_voxel(10.0));
     assert!(p.dense.is_none());
     assert_eq!(p.volume.optics.sigma_t, Vec3::ONE);
     let Density::Grid(g) = &p.volume.density else {

@@ -40,7 +40,7 @@ use lantern::gpu::mirrors::{
 use lantern::gpu::shaders::{ModuleSource, MODULES};
 use lantern::gpu::GpuRenderer;
 use lantern::physics::internal::sources::InternalLights;
-use lantern::render::{internal_params, Film, Prepared};
+use lantern::render::{internal_params, Film, PreparedScene};
 use lantern::scene::{Clock, InternalSettings, L1Form, Method, RenderSettings};
 
 /// Parses and validates one assembled module, naming the file and line of
@@ -283,7 +283,7 @@ fn oversized_buffers_fail_naming_the_limit() {
 }
 
 /// The scene at `side`², prepared.
-fn prepare_small(scene: &str, side: u32) -> Arc<Prepared> {
+fn prepare_small(scene: &str, side: u32) -> Arc<PreparedScene> {
     Arc::new(common::prepare_with(scene, |s| {
         s.camera.width = side;
         s.camera.height = side;
@@ -301,7 +301,7 @@ fn agree(scene: &str, side: u32, spp: u32) {
 /// background. (The map is not drawn: where a pixel sees only the sky its
 /// variance is the map's small variation over the pixel, and the two
 /// backends' `atan2`/`acos` differ by more than that lets a z-test pass.)
-fn prepare_sky(side: u32, map: bool) -> Arc<Prepared> {
+fn prepare_sky(side: u32, map: bool) -> Arc<PreparedScene> {
     Arc::new(common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
         s.camera.width = side;
         s.camera.height = side;
@@ -325,7 +325,7 @@ fn prepare_sky(side: u32, map: bool) -> Arc<Prepared> {
 }
 
 /// [`agree`] for a scene already prepared (`label` names it).
-fn agree_prepared(label: &str, prepared: Arc<Prepared>, side: u32, spp: u32) {
+fn agree_prepared(label: &str, prepared: Arc<PreparedScene>, side: u32, spp: u32) {
     let scene = label;
     let Some(ctx) = common::gpu() else { return };
     let t = Instant::now();
@@ -371,7 +371,7 @@ fn agree_gather_with(
     side: u32,
     spp: u32,
     edit: impl FnOnce(&mut InternalSettings),
-) -> Option<(Arc<Prepared>, RenderSettings, Arc<InternalLights>)> {
+) -> Option<(Arc<PreparedScene>, RenderSettings, Arc<InternalLights>)> {
     common::gpu()?;
     agree_gather_prepared(scene, prepare_small(scene, side), side, spp, edit)
 }
@@ -379,11 +379,11 @@ fn agree_gather_with(
 /// [`agree_gather_with`] for a scene already prepared (`scene` names it).
 fn agree_gather_prepared(
     scene: &str,
-    prepared: Arc<Prepared>,
+    prepared: Arc<PreparedScene>,
     side: u32,
     spp: u32,
     edit: impl FnOnce(&mut InternalSettings),
-) -> Option<(Arc<Prepared>, RenderSettings, Arc<InternalLights>)> {
+) -> Option<(Arc<PreparedScene>, RenderSettings, Arc<InternalLights>)> {
     let ctx = common::gpu()?;
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
@@ -662,7 +662,7 @@ use lantern::physics::volume::Volume;
 
 /// The scene's internal-lights parameters with `edit` applied (and the
 /// camera's eye, where `edit` asks for view walks).
-fn walk_params(prepared: &Prepared, edit: impl FnOnce(&mut InternalParams)) -> InternalParams {
+fn walk_params(prepared: &PreparedScene, edit: impl FnOnce(&mut InternalParams)) -> InternalParams {
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
     let mut p = internal_params(prepared, &settings);
@@ -1125,7 +1125,7 @@ fn gpu_walks_agree_puffs_grid() {
 
 /// The image mean of a CPU gather of `prepared` with `cache`, `spp`
 /// samples per pixel, gather seed `seed`.
-fn gather_mean(prepared: &Arc<Prepared>, cache: InternalLights, spp: u32, seed: u64) -> Vec3 {
+fn gather_mean(prepared: &Arc<PreparedScene>, cache: InternalLights, spp: u32, seed: u64) -> Vec3 {
     let never = AtomicBool::new(false);
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
@@ -1394,7 +1394,7 @@ const ISSUE23_SUN: &str = "Sun(direction: (0.6, -1.0, -0.5), irradiance: (3.0, 3
 
 /// Both backends' reference images of `prepared`, compared; the GPU side
 /// must finish within `secs` of its own time.
-fn issue23_agree(label: &str, prepared: Prepared, spp: u32, secs: f64) {
+fn issue23_agree(label: &str, prepared: PreparedScene, spp: u32, secs: f64) {
     let Some(ctx) = common::gpu() else { return };
     let prepared = Arc::new(prepared);
     let cpu = common::render(&prepared, Method::Reference, 1, spp);
@@ -1420,7 +1420,7 @@ fn issue23_dense_voxel_agrees_and_is_quick() {
         bounds_max: Vec3::splat(1.0),
         data,
     };
-    let prepared = Prepared::with_density(
+    let prepared = PreparedScene::with_density(
         issue23_scene(ISSUE23_SUN, 1.0),
         lantern::scene::Density::Grid(Arc::new(grid)),
     );
@@ -1434,7 +1434,7 @@ fn issue23_dense_voxel_agrees_and_is_quick() {
 fn issue23_opaque_sphere_and_far_light_agree() {
     let lights =
         format!("{ISSUE23_SUN}, Point(position: (3e19, 0.0, 0.0), intensity: (1e38, 1e38, 1e38))");
-    let prepared = Prepared::new(issue23_scene(&lights, 1e20), Path::new(".")).unwrap();
+    let prepared = PreparedScene::new(issue23_scene(&lights, 1e20), Path::new(".")).unwrap();
     assert!(prepared.dense.is_some());
     issue23_agree("opaque sphere, far light", prepared, 64, 60.0);
 }

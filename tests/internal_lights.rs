@@ -61,7 +61,7 @@ fn prepare_32(
     lights: u32,
     walks: u32,
     sh_order: u32,
-) -> std::sync::Arc<lantern::render::prepared::Prepared> {
+) -> std::sync::Arc<lantern::render::prepared::PreparedScene> {
     std::sync::Arc::new(common::prepare_with(rel, |s| {
         s.camera.width = 32;
         s.camera.height = 32;

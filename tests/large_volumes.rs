@@ -17,7 +17,7 @@ use std::time::Instant;
 use glam::{UVec3, Vec3};
 use lantern::gpu::GpuRenderer;
 use lantern::render::film::image_mean;
-use lantern::render::Prepared;
+use lantern::render::PreparedScene;
 use lantern::scene::volume::{load_grid, write_mitsuba_vol};
 use lantern::scene::{Density, GridFormat, Method, VoxelGrid};
 use rayon::prelude::*;
@@ -87,7 +87,10 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
     scene.camera.width = IMAGE;
     scene.camera.height = IMAGE;
     let t = Instant::now();
-    let prepared = Arc::new(Prepared::with_density(scene, Density::Grid(Arc::new(grid))));
+    let prepared = Arc::new(PreparedScene::with_density(
+        scene,
+        Density::Grid(Arc::new(grid)),
+    ));
     println!("prepared (majorants) in {:.2} s", t.elapsed().as_secs_f64());
     let mut settings = prepared.scene.render.clone();
     settings.seed = 1;

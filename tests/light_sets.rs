@@ -10,12 +10,12 @@ mod common;
 use std::sync::Arc;
 
 use lantern::render::film::Film;
-use lantern::render::Prepared;
+use lantern::render::PreparedScene;
 use lantern::scene::Method;
 
 /// The thin sphere at 16², with 256 lights of one walk each, so that the
 /// walk noise is large next to the pixel noise of a few hundred passes.
-fn noisy_lights() -> Arc<Prepared> {
+fn noisy_lights() -> Arc<PreparedScene> {
     Arc::new(common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
         s.camera.width = 16;
         s.camera.height = 16;
@@ -25,7 +25,7 @@ fn noisy_lights() -> Arc<Prepared> {
     }))
 }
 
-fn render(prepared: &Arc<Prepared>, seed: u64, every: u32, spp: u32) -> Film {
+fn render(prepared: &Arc<PreparedScene>, seed: u64, every: u32, spp: u32) -> Film {
     let mut settings = prepared.scene.render.clone();
     settings.method = Method::Internal;
     settings.seed = seed;

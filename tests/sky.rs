@@ -15,7 +15,7 @@ use lantern::physics::phase::hg;
 use lantern::physics::reference::radiance;
 use lantern::physics::rng::Rng;
 use lantern::physics::volume::Optics;
-use lantern::render::Prepared;
+use lantern::render::PreparedScene;
 use lantern::scene::{Environment as SceneEnvironment, Method, Scene, Sky};
 
 /// Chord length of the ray `o + t d` through the sphere of radius `r` at
@@ -122,7 +122,7 @@ fn furnace_both_methods() {
     for background in [true, false] {
         let scene = furnace_scene(background);
         let prepared = Arc::new(
-            Prepared::new(scene, std::path::Path::new(".")).unwrap_or_else(|e| panic!("{e}")),
+            PreparedScene::new(scene, std::path::Path::new(".")).unwrap_or_else(|e| panic!("{e}")),
         );
         let cam = prepared.camera;
         // The expected image (pixel centres), and which pixels are well
@@ -313,7 +313,7 @@ fn scene_files_with_a_sky() {
         let scene = Scene::from_ron(&text, &path).unwrap_or_else(|e| panic!("{sky}: {e}"));
         let again = Scene::from_ron(&scene.to_ron().expect("ron"), &path).expect("reads back");
         assert_eq!(scene, again);
-        let prepared = Prepared::new(scene, dir.path()).unwrap_or_else(|e| panic!("{e}"));
+        let prepared = PreparedScene::new(scene, dir.path()).unwrap_or_else(|e| panic!("{e}"));
         let env = prepared.lights.environment.as_ref().expect("a sky");
         assert!(!env.background);
         assert!(!env.is_black(), "{sky}");
@@ -359,7 +359,7 @@ fn bad_skies_are_refused_clearly() {
         assert!(e.contains("bad.ron") && e.contains(want), "{sky}: {e}");
     }
     let scene = Scene::from_ron(&scene_with("Map(file: \"absent.hdr\")", sun), &path).expect("ok");
-    let e = match Prepared::new(scene, dir.path()) {
+    let e = match PreparedScene::new(scene, dir.path()) {
         Ok(_) => panic!("a missing map was accepted"),
         Err(e) => format!("{:#}", anyhow::Error::from(e)),
     };
@@ -386,7 +386,7 @@ fn internal_lights_s1_holds_the_sky() {
     scene.render.internal.knobs.lights = 64;
     scene.render.internal.expert.walks = 256;
     scene.render.internal.expert.view_share = 0.0;
-    let prepared = Prepared::new(scene, std::path::Path::new(".")).unwrap();
+    let prepared = PreparedScene::new(scene, std::path::Path::new(".")).unwrap();
     let lights = common::build_lights(&prepared, &prepared.scene.render);
     let env = prepared.lights.sky().expect("a sky");
     let mut rng = Rng::for_sample(9, 0, 0);

@@ -9,7 +9,7 @@
 mod common;
 
 use glam::Vec3;
-use lantern::render::Prepared;
+use lantern::render::PreparedScene;
 use lantern::scene::Light;
 
 /// The suite, in the order of the issue (and the sky-lit plume of the sky
@@ -26,7 +26,7 @@ const SUITE: [&str; 7] = [
 
 /// `∫ ρ dℓ` along `origin + t·dir` (unit `dir`) over the medium's box,
 /// by the midpoint rule with steps of `step`.
-fn density_integral(p: &Prepared, origin: Vec3, dir: Vec3, step: f32) -> f32 {
+fn density_integral(p: &PreparedScene, origin: Vec3, dir: Vec3, step: f32) -> f32 {
     let Some((t0, t1)) = p.volume.clip(origin, dir) else {
         return 0.0;
     };
@@ -61,7 +61,7 @@ struct Measured {
     sun_chord: Option<f32>,
 }
 
-fn measure(p: &Prepared) -> Measured {
+fn measure(p: &PreparedScene) -> Measured {
     let (lo, hi) = p.volume.bounds;
     let sigma = p.volume.optics.sigma_t.max_element();
     let step = (hi - lo).max_element() / 400.0;
@@ -129,7 +129,7 @@ fn measure(p: &Prepared) -> Measured {
     }
 }
 
-fn load(name: &str) -> (Prepared, Measured) {
+fn load(name: &str) -> (PreparedScene, Measured) {
     let p = common::prepare_with(&format!("assets/scenes/suite/{name}.ron"), |_| {});
     let m = measure(&p);
     let o = &p.volume.optics;

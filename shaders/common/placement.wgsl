@@ -11,8 +11,8 @@
 // other random numbers. The tables are declared by the entry point
 // (shaders/placement/main.wgsl).
 
-// Stream index of the placement: `PLACEMENT_PASS`, from Rust (the
-// generated prelude: crate::physics::placement::PLACEMENT_PASS).
+// Stream index of the placement: `PLACEMENT_STREAM`, from Rust (the
+// generated prelude: crate::physics::placement::PLACEMENT_STREAM).
 
 // A placed point and its pdf.
 struct PlacedSample {

@@ -1,5 +1,5 @@
 // The placement's entry point: one invocation per internal light, light `i`
-// from stream `(seed, i, PLACEMENT_PASS)` (`sample_lights` in
+// from stream `(seed, i, PLACEMENT_STREAM)` (`sample_lights` in
 // src/physics/internal/placement.rs), writing two vec4 per light to `placed`:
 // (x_i, ρ(x_i)) and (V_i = 1/(M p(x_i)), p(x_i), 0, 0). The seed comes in
 // `pass_params`. Keep `PlacementParams` in sync with `GpuPlacementParams`
@@ -42,7 +42,7 @@ fn place_lights(@builtin(global_invocation_id) id: vec3<u32>) {
     if i >= placement_params.light_count {
         return;
     }
-    var rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, PLACEMENT_PASS);
+    var rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, PLACEMENT_STREAM);
     let s = placement_sample(&rng);
     var weight = 0.0;
     if s.pdf > 0.0 {

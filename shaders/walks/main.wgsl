@@ -12,8 +12,8 @@
 // workgroup reduces its walks in shared memory, eight quantities a round.
 //
 // Random streams (the CPU uses one stream per light for everything): the
-// rotation, then the arrival from `(seed, i, WALK_PASS)`, walk `w` from
-// `(seed, i, WALK_PASS + 1 + w)`. Same estimator, other random numbers.
+// rotation, then the arrival from `(seed, i, WALK_STREAM)`, walk `w` from
+// `(seed, i, WALK_STREAM + 1 + w)`. Same estimator, other random numbers.
 //
 // Per light, `walk_out` holds `record_stride` vec4 (xyz used): `sh_count`
 // coefficients of `F`, `sh_count` of the multiply scattered part,
@@ -26,7 +26,7 @@
 // `WalkParams` in sync with `GpuWalkParams` in src/gpu/mirrors.rs.
 
 // From Rust (the generated prelude, src/gpu/shaders.rs): the stream index
-// of the walks, `WALK_PASS` (crate::physics::internal::WALK_PASS), and the
+// of the walks, `WALK_STREAM` (crate::physics::internal::WALK_STREAM), and the
 // invocations (walks) per workgroup, `WALK_LANES`
 // (crate::gpu::walks::WALK_LANES).
 
@@ -116,7 +116,7 @@ fn walk_lights(
     let energy_at = record + 3u * count + n_ext;
     let scatter = scene.medium.albedo * scene.medium.sigma_t;
 
-    var rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_PASS);
+    var rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_STREAM);
     let rotation = random_rotation(&rng);
     let phi0 = 2.0 * PI * rng_next_f32(&rng);
     let w_dir = 4.0 * PI / f32(wp.walks);
@@ -137,7 +137,7 @@ fn walk_lights(
         } else {
             n = eye_direction(x);
         }
-        var walk_rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_PASS + 1u + w);
+        var walk_rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_STREAM + 1u + w);
         let settings = GateSettings(wp.s_star, terms, wp.clock, wp.rr_start);
         // The walks towards the eye keep only the collided part.
         walk_collided_only = towards_eye;

@@ -13,7 +13,7 @@ use super::args::{ImageSize, InternalArgs};
 use super::support::{gpu_context, gpu_renderer};
 use crate::cpu::Renderer;
 use crate::gpu::GpuContext;
-use crate::render::Prepared;
+use crate::render::PreparedScene;
 use crate::scene::{Method, Scene};
 use crate::session::Backend;
 
@@ -55,7 +55,7 @@ pub struct BenchArgs {
 /// (placement and walks).
 fn bench_gpu(
     ctx: &GpuContext,
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     spp: u32,
     repeats: u32,
 ) -> Result<(f64, f64, Option<f64>)> {
@@ -153,7 +153,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         internal.apply(&mut scene.render.internal);
         scene.render.internal.validate(&path)?;
         let dir = path.parent().unwrap_or(Path::new("."));
-        let prepared = Arc::new(Prepared::new(scene, dir)?);
+        let prepared = Arc::new(PreparedScene::new(scene, dir)?);
         let (w, h) = (prepared.camera.width, prepared.camera.height);
         let name = path
             .file_name()

@@ -33,7 +33,7 @@ use crate::render::export::{read_exr, write_exr};
 use crate::render::film::image_mean;
 use crate::render::plot::{Plot, Series};
 use crate::render::stats::rmse_against;
-use crate::render::{Film, Prepared};
+use crate::render::{Film, PreparedScene};
 use crate::scene::{Method, RenderSettings};
 
 /// Options of `lantern converge`.
@@ -242,7 +242,7 @@ fn checkpoint_due(next: &mut f64, spp: u32) -> bool {
 /// `max_spp` passes), recording a checkpoint whenever the sample count
 /// reaches the next of 1, 2, 3, 4, 6, 8, 11, 16, … (factor ≈ √2).
 fn curve(
-    prepared: &Arc<Prepared>,
+    prepared: &Arc<PreparedScene>,
     settings: &RenderSettings,
     budget: Duration,
     max_spp: u32,

@@ -39,7 +39,7 @@ use crate::cpu::Renderer;
 use crate::render::export::{read_exr, read_exr_metadata, RgbImage};
 use crate::render::film::image_mean;
 use crate::render::stats::{block_rmse_against, compare, rmse_against, BLOCK};
-use crate::render::{Film, Prepared};
+use crate::render::{Film, PreparedScene};
 use crate::scene::{Method, RenderSettings};
 
 /// Options of `lantern equal-time`.
@@ -119,7 +119,7 @@ pub struct Snapshot {
 /// Renders progressively with `settings` and measures the image at each of
 /// `times` (ascending), as the module says.
 fn snapshots(
-    prepared: &Arc<Prepared>,
+    prepared: &Arc<PreparedScene>,
     settings: &RenderSettings,
     times: &[f64],
     converged: &[Vec3],

@@ -17,7 +17,7 @@ use crate::cpu::Renderer;
 use crate::render::export::{write_exr_with_metadata, write_image};
 use crate::render::film::image_mean;
 use crate::render::tonemap::ViewTransform;
-use crate::render::{internal_params, light_set, Film, Prepared};
+use crate::render::{internal_params, light_set, Film, PreparedScene};
 use crate::scene::{Method, RenderSettings, Scene};
 use crate::session::{renew_gpu_lights, Backend, LightBuilder, Renewal};
 
@@ -206,7 +206,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     )
     .map_err(anyhow::Error::msg)?;
     let dir = scene_path.parent().unwrap_or(Path::new("."));
-    let prepared = Arc::new(Prepared::new(scene, dir)?);
+    let prepared = Arc::new(PreparedScene::new(scene, dir)?);
     let load_secs = t_load.elapsed().as_secs_f64();
     let mut settings = prepared.scene.render.clone();
     if let Some(m) = method {
@@ -426,7 +426,7 @@ fn print_time_limit(timed: &TimedArgs, spp: u32, spent: f64) {
 /// there and read back once for the image file.
 fn render_gpu(
     args: &RenderArgs,
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     settings: &RenderSettings,
     load_secs: f64,
     rule: StopRule,

@@ -14,14 +14,14 @@ use crate::cpu::Renderer;
 use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuRenderer};
 use crate::physics::internal::sources::BuildTimings;
-use crate::render::{internal_params, Film, Prepared};
+use crate::render::{internal_params, Film, PreparedScene};
 use crate::scene::{Method, RenderSettings, Scene};
 
 /// Loads a scene and prepares it for rendering.
-pub fn load_prepared(path: &Path) -> Result<Prepared> {
+pub fn load_prepared(path: &Path) -> Result<PreparedScene> {
     let scene = Scene::load(path)?;
     let dir = path.parent().unwrap_or(Path::new("."));
-    Ok(Prepared::new(scene, dir)?)
+    Ok(PreparedScene::new(scene, dir)?)
 }
 
 /// The GPU device for `--backend gpu`, with a notice of what it is.
@@ -44,7 +44,7 @@ pub fn gpu_context() -> Result<GpuContext> {
 /// spatial indices on the CPU), and their build times come back too.
 pub fn gpu_renderer(
     ctx: &GpuContext,
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     settings: &RenderSettings,
 ) -> Result<(GpuRenderer, Option<BuildTimings>)> {
     match settings.method {
@@ -78,7 +78,7 @@ pub fn gpu_renderer(
 /// Renders `spp` passes with `settings`; returns the image and the times
 /// to build and to gather.
 pub fn render_timed(
-    prepared: &Arc<Prepared>,
+    prepared: &Arc<PreparedScene>,
     settings: &RenderSettings,
     spp: u32,
 ) -> Result<(Vec<Vec3>, f64, f64)> {
@@ -101,7 +101,7 @@ pub fn render_timed(
 
 /// Loads and prepares `scene` with its image resized to `size`² pixels
 /// (0 keeps the scene's camera size).
-pub fn load_square(scene: &Path, size: u32) -> Result<Prepared> {
+pub fn load_square(scene: &Path, size: u32) -> Result<PreparedScene> {
     let prepared = load_prepared(scene)?;
     let (w, h) = if size == 0 {
         (prepared.camera.width, prepared.camera.height)
@@ -116,7 +116,7 @@ pub fn load_square(scene: &Path, size: u32) -> Result<Prepared> {
     resized.camera.width = size;
     resized.camera.height = size;
     resized.validate(scene)?;
-    Ok(Prepared::with_density(
+    Ok(PreparedScene::with_density(
         resized,
         prepared.volume.density.clone(),
     ))

@@ -43,7 +43,7 @@ use crate::physics::internal::sources::InternalLights;
 use crate::physics::internal::walk::Walks;
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::rng::Rng;
-use crate::render::{internal_params_for_set, Prepared};
+use crate::render::{internal_params_for_set, PreparedScene};
 use crate::scene::{Method, RenderSettings};
 
 /// Options of `lantern noise`.
@@ -130,7 +130,7 @@ struct Sums {
 /// `passes` gathers of every pixel; pass `p` uses `lights(p)` and the pixel
 /// random streams of pass `stream(p)`.
 fn part_noise(
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     settings: &RenderSettings,
     passes: u32,
     lights: impl Fn(u32) -> Result<Arc<InternalLights>>,
@@ -199,7 +199,7 @@ fn part_noise(
 /// (each `walks` walks towards `eye`), averaged over the lights whose mean
 /// is positive; `None` if none is.
 pub fn light_walk_stats(
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     cache: &InternalLights,
     eye: Vec3,
     count: usize,
@@ -277,7 +277,7 @@ pub struct NoiseReport {
 
 /// Measures the noise of `settings`' internal lights on `prepared`.
 pub fn measure(
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     settings: &RenderSettings,
     args: &NoiseArgs,
 ) -> Result<NoiseReport> {

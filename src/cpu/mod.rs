@@ -6,7 +6,7 @@
 //! renewed every `resample_every` passes when the settings ask for it, so
 //! that the walk noise averages out over the sets.
 
-pub mod shares;
+pub mod pixel_lights;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
@@ -18,7 +18,7 @@ use crate::physics::internal::gather::gather;
 use crate::physics::internal::sources::InternalLights;
 use crate::physics::reference::radiance_split;
 use crate::physics::rng::Rng;
-use crate::render::{internal_params, internal_params_for_set, light_set, Film, Prepared};
+use crate::render::{internal_params, internal_params_for_set, light_set, Film, PreparedScene};
 use crate::scene::{CameraFrame, Method, RenderSettings};
 
 /// One pass (one sample per pixel), by part. Rows top to bottom.
@@ -36,7 +36,7 @@ pub struct PassImage {
 
 /// A progressive CPU renderer for one scene and one set of settings.
 pub struct Renderer {
-    prepared: Arc<Prepared>,
+    prepared: Arc<PreparedScene>,
     settings: RenderSettings,
     /// Light set 0 (internal-lights method only).
     internal: Option<Arc<InternalLights>>,
@@ -49,7 +49,7 @@ impl Renderer {
     /// Builds the renderer; for the internal-lights method this places the
     /// lights and runs the walks. Returns `None` if `cancel` is set first.
     pub fn new(
-        prepared: Arc<Prepared>,
+        prepared: Arc<PreparedScene>,
         settings: &RenderSettings,
         cancel: &AtomicBool,
     ) -> Option<Self> {
@@ -71,7 +71,7 @@ impl Renderer {
     /// A renderer that reuses already built internal lights (which must
     /// belong to `prepared` and `settings`: they are light set 0).
     pub fn with_lights(
-        prepared: Arc<Prepared>,
+        prepared: Arc<PreparedScene>,
         settings: &RenderSettings,
         internal: Option<Arc<InternalLights>>,
     ) -> Self {
@@ -84,7 +84,7 @@ impl Renderer {
     }
 
     /// The prepared scene.
-    pub fn prepared(&self) -> &Arc<Prepared> {
+    pub fn prepared(&self) -> &Arc<PreparedScene> {
         &self.prepared
     }
 
@@ -192,14 +192,14 @@ impl Renderer {
 
     /// Lights contributing to pixel `(x, y)` with their shares (summing to
     /// one), largest first; empty for the reference method. See
-    /// [`shares::light_shares`].
+    /// [`pixel_lights::light_shares`].
     pub fn light_shares(&self, x: u32, y: u32) -> Vec<(usize, f32)> {
         match &self.internal {
             None => Vec::new(),
             Some(cache) => {
                 let cam = &self.prepared.camera;
                 let dir = cam.ray_dir(x as f32 + 0.5, y as f32 + 0.5);
-                shares::light_shares(&self.prepared.volume, cache, cam.eye, dir)
+                pixel_lights::light_shares(&self.prepared.volume, cache, cam.eye, dir)
             }
         }
     }
@@ -219,7 +219,7 @@ pub fn pixel_ray(cam: &CameraFrame, seed: u64, x: u32, y: u32, pass: u32) -> (Ve
 /// returns `false` to stop early. Builds the internal lights first when the
 /// method needs them.
 pub fn render(
-    prepared: Arc<Prepared>,
+    prepared: Arc<PreparedScene>,
     settings: &RenderSettings,
     mut on_pass: impl FnMut(&Film) -> bool,
 ) -> Film {

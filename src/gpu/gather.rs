@@ -20,7 +20,7 @@ use super::mirrors::GpuGatherParams;
 use super::renderer::{storage_buffer, GpuRenderer};
 use super::shaders::GATHER_MODULE;
 use crate::physics::internal::sources::InternalLights;
-use crate::render::Prepared;
+use crate::render::PreparedScene;
 
 /// The cached lights packed for the GPU.
 pub struct PackedLights {
@@ -129,7 +129,7 @@ impl GpuRenderer {
     /// for the random streams, as on the CPU.
     pub fn internal(
         ctx: &GpuContext,
-        prepared: &Prepared,
+        prepared: &PreparedScene,
         cache: &InternalLights,
         light_samples: u32,
         seed: u64,

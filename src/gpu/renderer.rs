@@ -19,7 +19,7 @@ use super::mirrors::{
     density_voxels, gpu_environment, gpu_lights, GpuAccum, GpuPassParams, GpuScene, WORKGROUP_SIDE,
 };
 use super::shaders::{ModuleSource, REFERENCE_MODULE};
-use crate::render::{Film, Prepared};
+use crate::render::{Film, PreparedScene};
 
 /// A compute pipeline built from one assembled module, with its bind-group
 /// layout taken from the shader.
@@ -92,7 +92,7 @@ pub(crate) struct SceneBuffers {
 
 impl SceneBuffers {
     /// Uploads the prepared scene.
-    pub fn new(ctx: &GpuContext, prepared: &Prepared) -> Result<Self, GpuError> {
+    pub fn new(ctx: &GpuContext, prepared: &PreparedScene) -> Result<Self, GpuError> {
         let vol = &prepared.volume;
         let scene_data = GpuScene::new(&prepared.camera, vol, &prepared.lights);
         let (voxels, dims) = density_voxels(&vol.density);
@@ -375,7 +375,11 @@ fn bind(
 impl GpuRenderer {
     /// The reference path tracer: uploads the scene and builds the
     /// pipeline; `seed` selects the random streams, as on the CPU.
-    pub fn reference(ctx: &GpuContext, prepared: &Prepared, seed: u64) -> Result<Self, GpuError> {
+    pub fn reference(
+        ctx: &GpuContext,
+        prepared: &PreparedScene,
+        seed: u64,
+    ) -> Result<Self, GpuError> {
         Self::build(ctx, prepared, seed, &REFERENCE_MODULE, &[], 0)
     }
 
@@ -384,7 +388,7 @@ impl GpuRenderer {
     /// holding `extra_bytes`.
     pub(crate) fn build(
         ctx: &GpuContext,
-        prepared: &Prepared,
+        prepared: &PreparedScene,
         seed: u64,
         module: &ModuleSource,
         extra: &[(u32, &wgpu::Buffer)],

@@ -165,14 +165,14 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!("GPU_MAX_GATES", U32, crate::gpu::mirrors::GPU_MAX_TERMS + 1),
     // Random stream tags.
     shared!(
-        "PLACEMENT_PASS",
+        "PLACEMENT_STREAM",
         U32,
-        crate::physics::internal::placement::PLACEMENT_PASS
+        crate::physics::internal::placement::PLACEMENT_STREAM
     ),
     shared!(
-        "WALK_PASS",
+        "WALK_STREAM",
         U32,
-        crate::physics::internal::sources::WALK_PASS
+        crate::physics::internal::sources::WALK_STREAM
     ),
     // The estimators' constants.
     shared!("PI", F32, std::f32::consts::PI),

@@ -47,7 +47,7 @@ use crate::physics::internal::sources::{
 };
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::sh::{sh_count, MAX_ORDER};
-use crate::render::Prepared;
+use crate::render::PreparedScene;
 
 /// One vec4 of a GPU buffer, read back.
 type Vec4 = [f32; 4];
@@ -82,7 +82,7 @@ struct Build {
 /// [`PlacementDensity`](crate::physics::internal::placement::PlacementDensity)).
 pub fn place_lights_gpu(
     ctx: &GpuContext,
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     params: &InternalParams,
 ) -> Result<GpuPlacement, GpuError> {
     let build = place(ctx, prepared, params)?;
@@ -117,7 +117,7 @@ fn unpack_placed(raw: &[[f32; 4]], m: usize) -> (Vec<InternalLight>, Vec<f32>) {
 /// GPU sampling; `timings.walks` the walks and the read-back.
 pub fn build_internal_lights_gpu(
     ctx: &GpuContext,
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     params: &InternalParams,
 ) -> Result<InternalLights, GpuError> {
     if params.terms > GPU_MAX_TERMS {
@@ -228,7 +228,7 @@ fn dispatch(
 /// Uploads the scene and the placement grid and enqueues the placement.
 fn place(
     ctx: &GpuContext,
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     params: &InternalParams,
 ) -> Result<Build, GpuError> {
     let m = params.lights.max(1);
@@ -358,7 +358,7 @@ fn place(
 /// per-light records, read back.
 fn walk(
     build: &Build,
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     params: &InternalParams,
 ) -> Result<(Vec<Vec4>, Vec<Vec4>), GpuError> {
     let ctx = &build.ctx;

@@ -13,7 +13,7 @@
 
 use crate::physics::internal::clock::Clock;
 use crate::render::prepared::{default_s_star, feature_length, internal_params};
-use crate::render::Prepared;
+use crate::render::PreparedScene;
 use crate::scene::{Method, RenderSettings};
 
 /// Bytes of memory a CPU render needs per pixel: two films of `f64` sums
@@ -138,7 +138,7 @@ pub fn duration(secs: f64) -> String {
 /// Warnings for `settings` on `prepared`, each a sentence naming the field
 /// or flag: nothing is refused here, but each says why the picture may be
 /// meaningless or the work very long.
-pub fn warnings(prepared: &Prepared, settings: &RenderSettings) -> Vec<String> {
+pub fn warnings(prepared: &PreparedScene, settings: &RenderSettings) -> Vec<String> {
     let mut out = Vec::new();
     if let Some(dense) = &prepared.dense {
         out.push(format!("medium: {dense}"));
@@ -166,7 +166,7 @@ pub fn warnings(prepared: &Prepared, settings: &RenderSettings) -> Vec<String> {
     out
 }
 
-fn internal_warnings(prepared: &Prepared, settings: &RenderSettings, out: &mut Vec<String>) {
+fn internal_warnings(prepared: &PreparedScene, settings: &RenderSettings, out: &mut Vec<String>) {
     let s = &settings.internal;
     let walks = u64::from(s.knobs.lights) * u64::from(s.expert.walks);
     if walks > MANY_WALKS {

@@ -16,5 +16,5 @@ pub mod tonemap;
 pub use film::Film;
 pub use prepared::{
     default_s_star, internal_params, internal_params_for_set, light_set, light_set_starting,
-    Prepared, SceneVolume,
+    PreparedScene, SceneVolume,
 };

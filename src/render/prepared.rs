@@ -186,7 +186,7 @@ fn clamp_dense(
 }
 
 /// Everything a renderer needs for one scene.
-pub struct Prepared {
+pub struct PreparedScene {
     /// The scene as loaded (settings included).
     pub scene: Scene,
     /// Ray generation.
@@ -204,11 +204,11 @@ pub struct Prepared {
     /// `g` or the seed (a renewed light set) reuses it.
     placement: Arc<PlacementCache>,
     /// The density field as given (before any clamp): what
-    /// [`Prepared::with_scene`] compares.
+    /// [`PreparedScene::with_scene`] compares.
     given: Density,
 }
 
-impl Prepared {
+impl PreparedScene {
     /// Loads the density and the environment map (both read relative to
     /// `scene_dir`) and builds the volume.
     pub fn new(scene: Scene, scene_dir: &Path) -> Result<Self, SceneError> {
@@ -220,7 +220,7 @@ impl Prepared {
     /// Builds from an already loaded density field; a medium denser than
     /// [`MAX_DEPTH_PER_VOXEL`] is clamped (and `dense` says so). A constant
     /// or clear sky is built here; an environment *map* is not read (use
-    /// [`Prepared::with_loaded`] with [`Scene::load_environment`]), and
+    /// [`PreparedScene::with_loaded`] with [`Scene::load_environment`]), and
     /// without it the scene has no sky.
     pub fn with_density(scene: Scene, density: Density) -> Self {
         let sky = match scene.environment.as_ref().map(|e| &e.sky) {
@@ -250,7 +250,7 @@ impl Prepared {
     }
 
     /// This scene's medium for `scene` over `density` and `sky` (as
-    /// [`Prepared::with_loaded`]), without building it again when the two
+    /// [`PreparedScene::with_loaded`]), without building it again when the two
     /// media share their density field (the same grid in memory, or the
     /// same shape) and extinction (the previewer's edits of the camera,
     /// the lights, the albedo, `g` or the method's settings, and its
@@ -328,7 +328,7 @@ impl Prepared {
 }
 
 /// The placement density built for one `u_mix` (its bits), shared by the
-/// [`Prepared`] of one medium.
+/// [`PreparedScene`] of one medium.
 type PlacementCache = Mutex<Option<(u32, Arc<PlacementDensity>)>>;
 
 /// `scene`'s loaded `sky` in the estimators' form, drawn behind the medium
@@ -386,7 +386,7 @@ pub fn lights_of(lights: &[Light]) -> Lights {
 /// defaults resolved (`s*`: [`default_s_star`]). These are the parameters
 /// of light set 0; see
 /// [`internal_params_for_set`].
-pub fn internal_params(prepared: &Prepared, settings: &RenderSettings) -> InternalParams {
+pub fn internal_params(prepared: &PreparedScene, settings: &RenderSettings) -> InternalParams {
     internal_params_for_set(prepared, settings, 0)
 }
 
@@ -412,7 +412,7 @@ pub fn light_set_starting(settings: &RenderSettings, pass: u32) -> Option<u32> {
 /// ratio (every stream hashes the whole seed, so the sets' placements and
 /// walks are independent).
 pub fn internal_params_for_set(
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     settings: &RenderSettings,
     set: u32,
 ) -> InternalParams {

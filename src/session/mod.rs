@@ -20,7 +20,7 @@ use std::sync::atomic::AtomicBool;
 
 use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuError, GpuRenderer};
-use crate::render::{internal_params_for_set, light_set_starting, Prepared};
+use crate::render::{internal_params_for_set, light_set_starting, PreparedScene};
 use crate::scene::{Method, RenderSettings};
 
 pub use worker::{
@@ -86,7 +86,7 @@ pub enum Renewal {
 /// method only), builds it with `builder` and hands it to the renderer.
 pub fn renew_gpu_lights(
     renderer: &mut GpuRenderer,
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     settings: &RenderSettings,
     pass: u32,
     builder: LightBuilder<'_>,

@@ -42,7 +42,7 @@ use crate::gpu::display::{read_accum, DisplayPass, ImageStats};
 use crate::gpu::{GpuContext, GpuError, GpuRenderer};
 use crate::physics::internal::clock::Clock;
 use crate::physics::internal::sources::InternalLights;
-use crate::render::{Film, Prepared};
+use crate::render::{Film, PreparedScene};
 use crate::scene::{Density, DensitySource, Method, Scene};
 
 pub use crate::scene::InternalSettings;
@@ -400,8 +400,8 @@ struct DensityCache {
     density: Option<Density>,
     /// The last job's medium, whose volume and majorants the next job
     /// reuses when only what does not change them changed
-    /// ([`Prepared::with_scene`]).
-    prepared: Option<Arc<Prepared>>,
+    /// ([`PreparedScene::with_scene`]).
+    prepared: Option<Arc<PreparedScene>>,
     /// The sky of the last scene (a map is read, a clear sky baked, once).
     sky_key: Option<(Option<crate::scene::Environment>, Option<[u32; 3]>, PathBuf)>,
     sky: Option<crate::scene::LoadedSky>,
@@ -425,10 +425,10 @@ impl DensityCache {
         scene: &Scene,
         density: &Density,
         sky: &Option<crate::scene::LoadedSky>,
-    ) -> Arc<Prepared> {
+    ) -> Arc<PreparedScene> {
         let prepared = Arc::new(match &self.prepared {
             Some(last) => last.with_scene(scene.clone(), density.clone(), sky),
-            None => Prepared::with_loaded(scene.clone(), density.clone(), sky.clone()),
+            None => PreparedScene::with_loaded(scene.clone(), density.clone(), sky.clone()),
         });
         self.prepared = Some(prepared.clone());
         prepared
@@ -818,7 +818,7 @@ impl JobContext<'_> {
     /// it (nothing published then is wrong, only incomplete).
     fn run_gpu(
         &mut self,
-        prepared: &Prepared,
+        prepared: &PreparedScene,
         lights: Option<&InternalLights>,
         extra: &dyn Fn(bool, Option<(f32, f32)>) -> SnapshotExtra,
     ) -> Result<Option<Command>, GpuError> {
@@ -871,7 +871,7 @@ impl JobContext<'_> {
 fn gpu_engines(
     ctx: &GpuContext,
     job: &Job,
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     lights: Option<&InternalLights>,
 ) -> Result<Vec<(Method, GpuRenderer)>, GpuError> {
     job.estimators
@@ -952,7 +952,7 @@ fn gpu_streams(gpu: &GpuWorker, engines: &[(Method, GpuRenderer)]) -> Result<Gpu
 struct PreviewInput<'a> {
     density: &'a Density,
     /// The job's medium at full resolution (the preview copies its volume).
-    prepared: &'a Prepared,
+    prepared: &'a PreparedScene,
     sky: &'a Option<crate::scene::LoadedSky>,
     bounds: Option<(Vec3, Vec3)>,
 }

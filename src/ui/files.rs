@@ -21,7 +21,7 @@ use super::viewport::Display;
 use crate::atomic::write_atomically;
 use crate::render::export::{extension, write_png_bytes};
 use crate::render::tonemap::to_srgb8;
-use crate::render::Prepared;
+use crate::render::PreparedScene;
 use crate::scene::{DensitySource, GridFormat, GridSource, Method, Scene};
 use crate::session::Snapshot;
 
@@ -121,7 +121,7 @@ pub fn load(path: &Path, current: &Scene) -> Result<Loaded, String> {
         .load_environment(&dir)
         .map_err(|e| format!("cannot open {}: {e:#}", path.display()))?;
     let bounds = density.bounds();
-    let prepared = Prepared::with_loaded(scene.clone(), density, sky);
+    let prepared = PreparedScene::with_loaded(scene.clone(), density, sky);
     let warnings = crate::render::limits::warnings(&prepared, &scene.render)
         .into_iter()
         .map(|w| format!("{}: {w}", path.display()))

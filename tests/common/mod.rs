@@ -10,7 +10,7 @@ use std::sync::Arc;
 use glam::Vec3;
 use lantern::render::export::write_exr;
 use lantern::render::film::image_mean;
-use lantern::render::{Film, Prepared};
+use lantern::render::{Film, PreparedScene};
 use lantern::scene::{Method, Scene};
 
 /// The repository root.
@@ -19,22 +19,22 @@ pub fn root() -> PathBuf {
 }
 
 /// Loads and prepares a scene given relative to the repository root.
-pub fn prepare(rel: &str) -> Arc<Prepared> {
+pub fn prepare(rel: &str) -> Arc<PreparedScene> {
     Arc::new(prepare_with(rel, |_| {}))
 }
 
 /// Loads a scene, lets `edit` change it, and prepares it.
-pub fn prepare_with(rel: &str, edit: impl FnOnce(&mut Scene)) -> Prepared {
+pub fn prepare_with(rel: &str, edit: impl FnOnce(&mut Scene)) -> PreparedScene {
     let path = root().join(rel);
     let mut scene = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
     edit(&mut scene);
     scene.validate(&path).unwrap_or_else(|e| panic!("{e}"));
-    Prepared::new(scene, path.parent().unwrap()).unwrap_or_else(|e| panic!("{e}"))
+    PreparedScene::new(scene, path.parent().unwrap()).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Renders `spp` passes with `method` and `seed` (other settings: the
 /// scene's).
-pub fn render(prepared: &Arc<Prepared>, method: Method, seed: u64, spp: u32) -> Film {
+pub fn render(prepared: &Arc<PreparedScene>, method: Method, seed: u64, spp: u32) -> Film {
     let mut settings = prepared.scene.render.clone();
     settings.method = method;
     settings.seed = seed;
@@ -45,7 +45,7 @@ pub fn render(prepared: &Arc<Prepared>, method: Method, seed: u64, spp: u32) -> 
 /// Builds the internal lights on the CPU for `settings` (placement and
 /// walks), for tests that gather with the same lights on two backends.
 pub fn build_lights(
-    prepared: &Prepared,
+    prepared: &PreparedScene,
     settings: &lantern::scene::RenderSettings,
 ) -> Arc<lantern::physics::internal::sources::InternalLights> {
     let never = std::sync::atomic::AtomicBool::new(false);
@@ -63,7 +63,7 @@ pub fn build_lights(
 /// Gathers `spp` passes on the CPU with cached `lights` (seed and other
 /// settings from `settings`).
 pub fn gather_cpu(
-    prepared: &Arc<Prepared>,
+    prepared: &Arc<PreparedScene>,
     settings: &lantern::scene::RenderSettings,
     lights: &Arc<lantern::physics::internal::sources::InternalLights>,
     spp: u32,

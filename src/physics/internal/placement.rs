@@ -43,8 +43,8 @@ use crate::physics::volume::DensityField;
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) used for placement, so
 /// that it does not share numbers with renders using the same seed (the
-/// WGSL's `PLACEMENT_PASS` is generated from it).
-pub const PLACEMENT_PASS: u32 = 0x706c_6163;
+/// WGSL's `PLACEMENT_STREAM` is generated from it).
+pub const PLACEMENT_STREAM: u32 = 0x706c_6163;
 
 /// One internal light's position and the volume it stands for.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -386,7 +386,7 @@ pub fn sample_lights(sampler: &PlacementDensity, m: usize, seed: u64) -> Vec<Pla
     (0..m)
         .into_par_iter()
         .map(|i| {
-            let mut rng = Rng::for_sample(seed, i as u32, PLACEMENT_PASS);
+            let mut rng = Rng::for_sample(seed, i as u32, PLACEMENT_STREAM);
             let (position, pdf) = sampler.sample(&mut rng);
             let weight = if pdf > 0.0 { inv_m / pdf } else { 0.0 };
             PlacedLight {

@@ -95,13 +95,13 @@ use crate::physics::tracking::{transmittance, transmittance_at_rate};
 use crate::physics::volume::{DensityField, Volume};
 
 /// Stream index (the `pass` of [`Rng::for_sample`]) of the walks, apart
-/// from the placement's and the renders' (the WGSL's `WALK_PASS` is
+/// from the placement's and the renders' (the WGSL's `WALK_STREAM` is
 /// generated from it).
-pub const WALK_PASS: u32 = 0x7761_6c6b;
+pub const WALK_STREAM: u32 = 0x7761_6c6b;
 
 /// Stream index of the sky's light arriving at each internal light
 /// ([`sky_arrival`]; CPU only, for both backends' light sets).
-pub const SKY_PASS: u32 = 0x736b_7921;
+pub const SKY_STREAM: u32 = 0x736b_7921;
 
 /// Directions per light of [`sky_arrival`]'s estimate, at least.
 const SKY_SAMPLES: u32 = 16;
@@ -521,7 +521,7 @@ pub fn sky_arrival<D: DensityField>(
         .par_iter()
         .enumerate()
         .map(|(i, light)| {
-            let mut rng = Rng::for_sample(params.seed, i as u32, SKY_PASS);
+            let mut rng = Rng::for_sample(params.seed, i as u32, SKY_STREAM);
             let mut c = vec![Vec3::ZERO; count];
             let mut y = [0.0f32; MAX_COUNT];
             for _ in 0..samples {
@@ -702,7 +702,7 @@ impl InternalLights {
                 if cancel.load(Ordering::Relaxed) {
                     return None;
                 }
-                let mut rng = Rng::for_sample(params.seed, i as u32, WALK_PASS);
+                let mut rng = Rng::for_sample(params.seed, i as u32, WALK_STREAM);
                 let x = light.position;
                 // Light arriving from each external light.
                 let mut arrival = Vec::with_capacity(n_ext);

@@ -38,7 +38,7 @@ use crate::physics::volume::{DensityField, Volume};
 
 /// Stream index of the placement in the camera's windows (apart from the
 /// density placement's, the walks' and the renders').
-pub const VIEW_PLACEMENT_PASS: u32 = 0x7669_6577;
+pub const VIEW_PLACEMENT_STREAM: u32 = 0x7669_6577;
 
 /// Camera rays tried per light before it falls back to no position (most
 /// images show the medium over a good part of their area).
@@ -84,7 +84,7 @@ pub fn place_in_view<D: DensityField>(
     (0..count)
         .into_par_iter()
         .map(|i| {
-            let mut rng = Rng::for_sample(seed, i as u32, VIEW_PLACEMENT_PASS);
+            let mut rng = Rng::for_sample(seed, i as u32, VIEW_PLACEMENT_STREAM);
             for _ in 0..TRIES {
                 let sx = 2.0 * rng.next_f32() - 1.0;
                 let sy = 2.0 * rng.next_f32() - 1.0;
