@@ -2,7 +2,6 @@
 //! gates (distance, or grey optical depth), and how it is marched along a
 //! ray ([method §3 and §7](crate::doc::method)).
 //!
-//!
 //! [method §7](crate::doc::method) also allows the clock `dτ = c dℓ`. With RGB extinction one
 //! clock must serve all channels; this module uses the **grey extinction
 //! `c_g = max(σ_t) ρ`** (the channel that scatters most, which is also what
@@ -27,8 +26,8 @@
 //! where the edge falls on it: on a homogeneous sphere lit from behind the
 //! camera it draws faint rings about the image's centre (README, Known
 //! problems; a lattice shifted by a phase hashed from each ray removes
-//! them but moves the puffs' dim edges at `s*` 0.25 from +3.4 % to +6.1 %,
-//! so it is not in).
+//! them, but with it the backends' agreement test on a 512³ grid fails,
+//! [validation](crate::doc::validation) §3.1, so it is not in).
 //! The clock is that quadrature;
 //! the collisions themselves come from spectral tracking against the true
 //! `c`, so the walk stays unbiased for `L` whatever the quadrature error.

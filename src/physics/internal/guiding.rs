@@ -3,14 +3,14 @@
 //! function, its weight corrected so that it stays unbiased
 //! ([method §4](crate::doc::method); a choice beyond the note).
 //!
-//!
-//! The internal lights' walks ([`accumulate_j_from`](super::walk::Walks::accumulate_j_from)) draw their direction
-//! after a collision from a mixture: the phase function, or with
-//! probability [`GUIDE_PROBABILITY`] a lobe about the direction towards an
-//! external light, and multiply the weight by the phase function over the
-//! mixture's density ([`guided_direction`]). The expectation above is
-//! unchanged (importance sampling of the collision's direction integral);
-//! what changes is which walks carry the light: unguided, the few that
+//! The internal lights' walks
+//! ([`accumulate_j_from`](super::walk::Walks::accumulate_j_from)) draw
+//! their direction after a collision from a mixture: the phase function,
+//! or with probability [`GUIDE_PROBABILITY`] a lobe about the direction
+//! towards an external light, and multiply the weight by the phase
+//! function over the mixture's density ([`guided_direction`]). The walk's
+//! expectation ([`super::walk`]) is unchanged (importance sampling of the
+//! collision's direction integral); what changes is which walks carry the light: unguided, the few that
 //! wander to the lit side carry most of it. Only a walk's first
 //! [`GUIDED_COLLISIONS`] collisions are guided: the weight factors of many
 //! guided collisions multiply into a heavy tail.

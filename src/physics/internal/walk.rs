@@ -3,7 +3,6 @@
 //!
 //! # What the walk estimates
 //!
-//!
 //! Let a backward walk start at `z` and fly along `−n` (`n` is the
 //! direction light travels at `z`): free flights sample collisions with
 //! rate `c` (spectral tracking), each real collision multiplies the weight
