@@ -46,10 +46,8 @@ pub fn collision_probability<D: DensityField>(
 /// `collision_probability`'s is at its point: the two agree to the
 /// quadrature's second order, not bit for bit.
 pub struct ChancesAlongRay {
-    origin: Vec3,
-    dir: Vec3,
-    t_exit: f32,
-    s_star: f32,
+    /// The ray, with the optical-depth clock of the window's lattice.
+    ray: ClockRay,
     /// The nearest point asked for so far and its optical depth to the
     /// exit (`known_t` infinite: none yet).
     known_t: f32,
@@ -63,10 +61,13 @@ impl ChancesAlongRay {
     /// the window `s_star`.
     pub fn new(origin: Vec3, dir: Vec3, t_exit: f32, s_star: f32) -> Self {
         Self {
-            origin,
-            dir,
-            t_exit,
-            s_star,
+            ray: ClockRay {
+                clock: Clock::OpticalDepth,
+                s_star,
+                origin,
+                dir,
+                t_exit,
+            },
             known_t: f32::INFINITY,
             known_tau: 0.0,
             saturated: false,
@@ -81,20 +82,14 @@ impl ChancesAlongRay {
         if self.saturated {
             return 1.0;
         }
-        let t = t.min(self.t_exit).min(self.known_t);
+        let t_exit = self.ray.t_exit;
+        let t = t.min(t_exit).min(self.known_t);
         let (t_stop, budget) = if self.known_t.is_finite() {
             (self.known_t, COLLISION_DEPTH - self.known_tau)
         } else {
-            (self.t_exit, COLLISION_DEPTH)
+            (t_exit, COLLISION_DEPTH)
         };
-        let ray = ClockRay {
-            clock: Clock::OpticalDepth,
-            s_star: self.s_star,
-            origin: self.origin,
-            dir: self.dir,
-            t_exit: self.t_exit,
-        };
-        match march_clock(vol, &ray, t, t_stop, budget) {
+        match march_clock(vol, &self.ray, t, t_stop, budget) {
             ClockMarch::Reached(_) => {
                 self.saturated = true;
                 return 1.0;

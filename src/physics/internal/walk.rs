@@ -75,7 +75,6 @@ pub fn gated_walk<D: DensityField>(
 /// walk's directions after its first collisions are guided towards those
 /// lights ([`guided_direction`]) or come from the phase function alone
 /// (both unbiased; the internal lights guide them).
-#[derive(Clone, Copy)]
 pub struct Walks<'a, D> {
     /// The medium.
     pub vol: &'a Volume<D>,
@@ -246,40 +245,37 @@ const LAZY_CLOCK_PENDING: usize = 16;
 /// at all (the clock's quadrature was about half of the re-sampling time on
 /// the puffs before).
 struct LazyClock {
-    /// The window `s*` (which fixes the quadrature lattice).
-    s_star: f32,
     /// The clock at the start of the first pending flight.
     exact: f32,
     /// Upper bound of the pending flights' clock.
     slack: f32,
-    /// Pending flights: `(origin, dir, t_start, t_end, t_exit)` (`t_exit`:
-    /// where the ray leaves the box, which fixes the quadrature lattice).
-    pending: [(Vec3, Vec3, f32, f32, f32); LAZY_CLOCK_PENDING],
+    /// Pending flights: `(ray, t_start, t_end)` (the ray, its exit and
+    /// the window fix the quadrature lattice).
+    pending: [(ClockRay, f32, f32); LAZY_CLOCK_PENDING],
     len: usize,
 }
 
 impl LazyClock {
-    fn new(s_star: f32, exact: f32) -> Self {
+    fn new(exact: f32) -> Self {
+        let none = ClockRay {
+            clock: Clock::OpticalDepth,
+            s_star: 0.0,
+            origin: Vec3::ZERO,
+            dir: Vec3::ZERO,
+            t_exit: 0.0,
+        };
         Self {
-            s_star,
             exact,
             slack: 0.0,
-            pending: [(Vec3::ZERO, Vec3::ZERO, 0.0, 0.0, 0.0); LAZY_CLOCK_PENDING],
+            pending: [(none, 0.0, 0.0); LAZY_CLOCK_PENDING],
             len: 0,
         }
     }
 
     /// Marches the pending flights; returns the exact clock after them.
     fn resolve<D: DensityField>(&mut self, vol: &Volume<D>) -> f32 {
-        for &(origin, dir, t0, t1, t_exit) in &self.pending[..self.len] {
-            let ray = ClockRay {
-                clock: Clock::OpticalDepth,
-                s_star: self.s_star,
-                origin,
-                dir,
-                t_exit,
-            };
-            if let ClockMarch::Exhausted(d) = march_clock(vol, &ray, t0, t1, f32::INFINITY) {
+        for (ray, t0, t1) in &self.pending[..self.len] {
+            if let ClockMarch::Exhausted(d) = march_clock(vol, ray, *t0, *t1, f32::INFINITY) {
                 self.exact += d;
             }
         }
@@ -288,12 +284,12 @@ impl LazyClock {
         self.exact
     }
 
-    /// Keeps the flight `origin + t dir`, `t ∈ [t0, t1]` (the ray leaving
-    /// the box at `t_exit`), whose clock is at most `bound`, pending.
+    /// Keeps the flight `(ray, t0, t1)`, `t ∈ [t0, t1]` along the ray,
+    /// whose clock is at most `bound`, pending.
     fn defer<D: DensityField>(
         &mut self,
         vol: &Volume<D>,
-        flight: (Vec3, Vec3, f32, f32, f32),
+        flight: (ClockRay, f32, f32),
         bound: f32,
     ) {
         if self.len == LAZY_CLOCK_PENDING {
@@ -306,8 +302,9 @@ impl LazyClock {
 }
 
 /// One flight with the optical-depth clock over `[t_enter, t_exit]` of
-/// `ray` (`origin + t dir`, its window that of `lazy`), the next gate at clock `gate_clock`, in one traversal
-/// of the majorant cells: spectral tracking's tentative collisions in
+/// `ray` (`origin + t dir`, with its window), the next gate at clock
+/// `gate_clock`, in one traversal of the majorant cells: spectral
+/// tracking's tentative collisions in
 /// order and, once a gate may be near, the clock alongside them. While the
 /// majorant optical depth says the gate cannot have come (see
 /// [`LazyClock`]) nothing is marched; at the first tentative collision
@@ -340,7 +337,7 @@ fn optical_depth_flight<D: DensityField>(
     let mut resolved = false;
     let mut bound = lazy.slack;
     let mut clock = 0.0f32;
-    let mut lattice = ClockLattice::new(vol, lazy.s_star, origin, dir);
+    let mut lattice = ClockLattice::new(vol, ray.s_star, origin, dir);
     let mut outcome = None;
     // Marches the pending flights, then this one from its start to `to`
     // against what is left to the gate.
@@ -397,7 +394,7 @@ fn optical_depth_flight<D: DensityField>(
     });
     if let Some(outcome) = outcome {
         if let Flight::Collision { t, advanced: None } = outcome {
-            lazy.defer(vol, (origin, dir, t_enter, t, t_exit), bound - lazy.slack);
+            lazy.defer(vol, (*ray, t_enter, t), bound - lazy.slack);
         }
         return outcome;
     }
@@ -447,7 +444,7 @@ impl<D: DensityField> Walks<'_, D> {
         // The clock at `origin`: exactly `lazy.exact` with the geometric clock
         // (which is never pending), `lazy.exact` plus the pending flights with
         // the optical-depth clock.
-        let mut lazy = LazyClock::new(s_star, 0.0);
+        let mut lazy = LazyClock::new(0.0);
         let mut collisions = 0u32;
         // One flight per iteration: from `origin` to the next gate, the next
         // real collision, or the exit of the box, whichever comes first.
