@@ -258,9 +258,9 @@ fn mirrors_match_wgsl_layout() {
             window_scatters,
             view_offset,
             has_view,
-            _pad0,
-            _pad1,
-            _pad2
+            sky_offset,
+            has_sky,
+            _pad0
         ]
     );
 }
@@ -463,6 +463,20 @@ fn sky_gather_agrees() {
         20,
         128,
         |_| {},
+    );
+}
+
+/// Issue 24: `L₁` as the note's sum over the internal lights under the
+/// sky map: each light's `S₁` holds the sky's share (its SH coefficients,
+/// scaled band by band by the phase function), on the GPU as on the CPU.
+#[test]
+fn sky_gather_agrees_with_point_lights() {
+    agree_gather_prepared(
+        "thin sphere under the sky map",
+        prepare_sky(20, true),
+        20,
+        128,
+        |s| s.expert.l1 = L1Form::Points,
     );
 }
 

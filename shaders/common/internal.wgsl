@@ -21,7 +21,8 @@ fn internal_light(i: u32) -> InternalLight {
     return InternalLight(a.xyz, a.w, b.x, b.y);
 }
 
-// `S₁(x_i, n)` from the stored arriving light (`eval_s1`).
+// `S₁(x_i, n)` from the stored arriving light, the suns' and the sky's
+// (`eval_s1`).
 fn eval_s1(i: u32, n: vec3<f32>) -> vec3<f32> {
     let light = internal_light(i);
     let count = gather_params.external_count;
@@ -30,6 +31,21 @@ fn eval_s1(i: u32, n: vec3<f32>) -> vec3<f32> {
         let arrival = internal_vec4[gather_params.arrival_offset + i * count + l].xyz;
         let s = light_at(l, light.position);
         sum += arrival * hg(gather_params.g, dot(s.travel, n));
+    }
+    if gather_params.has_sky != 0u {
+        // Funk–Hecke: the phase function scales the sky's band `l` by
+        // `g^l`.
+        var y = sh_basis(gather_params.sh_order, n);
+        let base = gather_params.sky_offset + i * gather_params.sh_count;
+        var from_sky = vec3<f32>(0.0);
+        var g_l = 1.0;
+        for (var l = 0u; l <= gather_params.sh_order; l++) {
+            for (var k = l * l; k < (l + 1u) * (l + 1u); k++) {
+                from_sky += internal_vec4[base + k].xyz * (g_l * y[k]);
+            }
+            g_l *= gather_params.g;
+        }
+        sum += max(from_sky, vec3<f32>(0.0));
     }
     return sum * gather_params.scatter * light.density;
 }

@@ -9,7 +9,9 @@
 //   part of it the walks carried through a collision per light
 //   (`scattered_offset`), then `external_count` arriving lights per light
 //   (`T E`), then, with view walks, one vec4 per light: their estimate of
-//   the collided part towards the eye (`view_offset`).
+//   the collided part towards the eye (`view_offset`), then, under a sky,
+//   `sh_count` SH coefficients per light of the sky's light arriving there
+//   (`sky_offset`).
 // - `internal_words`: the fine grid's `starts` and `ids`, the cluster
 //   grid's `starts` and `ids`, cluster powers and per-slot light powers (f32
 //   bits), and the live clusters; each table at an offset given below.
@@ -55,9 +57,12 @@ struct GatherParams {
     // when `has_view` is 1 (`InternalLights::reconstruct_view`).
     view_offset: u32,
     has_view: u32,
+    // Vec4 table offset of the sky's arriving light, `sh_count` SH
+    // coefficients per light, read when `has_sky` is 1
+    // (`InternalLights::sky`).
+    sky_offset: u32,
+    has_sky: u32,
     _pad0: u32,
-    _pad1: u32,
-    _pad2: u32,
 }
 
 // The clock tags `CLOCK_*` and the forms of the gather's L₁, `L1_*`, come

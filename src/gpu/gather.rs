@@ -5,7 +5,7 @@
 //! ([`super::walks::build_internal_lights_gpu`]) and uploaded once:
 //! positions and weights, the SH coefficients of
 //! the multiply scattered part of `J`, the light arriving at each light
-//! from the external ones, and both spatial indices of
+//! from the external ones and from the sky, and both spatial indices of
 //! `physics::internal::light_index` (the fine grid of the kernel reconstruction and
 //! the cluster grid of the light selection, which only the points form
 //! reads).
@@ -52,6 +52,9 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
     let view_offset = vec4.len() as u32;
     let has_view = cache.has_view();
     vec4.extend(cache.view.iter().map(|v| [v.x, v.y, v.z, 0.0]));
+    let sky_offset = vec4.len() as u32;
+    let has_sky = !cache.sky.is_empty();
+    vec4.extend(cache.sky.iter().map(|c| [c.x, c.y, c.z, 0.0]));
     if vec4.is_empty() {
         vec4.push([0.0; 4]);
     }
@@ -111,9 +114,9 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
         window_scatters: cache.params.window_scatters.max(1),
         view_offset,
         has_view: u32::from(has_view),
+        sky_offset,
+        has_sky: u32::from(has_sky),
         _pad0: 0,
-        _pad1: 0,
-        _pad2: 0,
     };
     PackedLights {
         params,

@@ -264,12 +264,14 @@ pub struct GpuGatherParams {
     /// 1: `L₀`'s collided part averages the view walks' estimates; 0: it
     /// evaluates the SH at `scattered_offset`.
     pub has_view: u32,
+    /// Vec4 table offset: per light the SH coefficients of the sky's light
+    /// arriving there (`InternalLights::sky`), if `has_sky`.
+    pub sky_offset: u32,
+    /// 1: the lights' `S₁` holds the sky's share (evaluated from the
+    /// coefficients at `sky_offset`); 0: no sky.
+    pub has_sky: u32,
     /// Padding to a multiple of 16 bytes.
     pub _pad0: u32,
-    /// See `_pad0`.
-    pub _pad1: u32,
-    /// See `_pad0`.
-    pub _pad2: u32,
 }
 const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 208);
 
