@@ -187,4 +187,10 @@ pub struct TimedArgs {
     /// it next to a converged image (`NAME_var.exr` beside `NAME.exr`).
     #[arg(long, value_name = "FILE.exr")]
     pub variance: Option<PathBuf>,
+    /// With `--time`, renew the internal lights' set every
+    /// `resample_every` passes as a render of fixed spp does, instead of
+    /// balancing the sets' length against the passes from the noise and
+    /// the costs measured while rendering (CPU backend).
+    #[arg(long)]
+    pub fixed_renewal: bool,
 }

@@ -35,7 +35,7 @@ use glam::Vec3;
 
 use super::args::InternalArgs;
 use super::support::{load_square, renewal_text, variance_path};
-use crate::cpu::Renderer;
+use crate::cpu::{Passes, Renderer};
 use crate::render::export::{read_exr, read_exr_metadata, RgbImage};
 use crate::render::film::image_mean;
 use crate::render::stats::{block_rmse_against, compare, rmse_against, BLOCK};
@@ -69,6 +69,12 @@ pub struct EqualTimeArgs {
     /// Output folder for report.md and report.csv.
     #[arg(long, default_value = "target/equal-time")]
     pub out: PathBuf,
+    /// Renew the internal lights' set every `resample_every` passes
+    /// instead of balancing the sets' length against the passes from the
+    /// noise and costs measured while rendering (`lantern render --time`'s
+    /// default, which this command measures).
+    #[arg(long)]
+    pub fixed_renewal: bool,
     /// Internal-lights parameters (default: the scene's).
     #[command(flatten)]
     pub internal: InternalArgs,
@@ -125,12 +131,14 @@ fn snapshots(
     converged: &[Vec3],
     converged_var: &[Vec3],
     label: &str,
+    balanced: bool,
 ) -> Result<Vec<Snapshot>> {
     let never = AtomicBool::new(false);
     let start = Instant::now();
     let renderer =
         Renderer::new(prepared.clone(), settings, &never).context("render was cancelled")?;
     let mut elapsed = start.elapsed();
+    let mut passes = Passes::new(&renderer, balanced, elapsed.as_secs_f64());
     let cam = prepared.camera;
     let (w, h) = (cam.width as usize, cam.height as usize);
     let mut film = Film::new(cam.width, cam.height);
@@ -140,12 +148,19 @@ fn snapshots(
         let due = Duration::from_secs_f64(target);
         while pass == 0 || elapsed < due {
             let start = Instant::now();
-            let img = renderer
-                .pass(pass, &never)
+            let img = passes
+                .next(&renderer, &never)
                 .context("render was cancelled")?;
             film.add_pass(&img.total);
             elapsed += start.elapsed();
             pass += 1;
+        }
+        if let Some(b) = passes.balanced() {
+            eprintln!(
+                "{label}: light set {} of {} passes (balanced)",
+                passes.last_set(),
+                b.period()
+            );
         }
         let errors = errors(&film.mean(), converged, converged_var, w, h);
         eprintln!(
@@ -317,6 +332,7 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
                 c,
                 v,
                 &format!("{stem} reference"),
+                !args.fixed_renewal,
             )?,
         ),
         (
@@ -328,6 +344,7 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
                 c,
                 v,
                 &format!("{stem} internal"),
+                !args.fixed_renewal,
             )?,
         ),
     ];
@@ -362,7 +379,14 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
         i.expert.clock,
         i.expert.l1,
         i.expert.light_samples,
-        renewal_text(i.expert.resample_every)
+        if args.fixed_renewal || i.expert.resample_every == 0 {
+            renewal_text(i.expert.resample_every)
+        } else {
+            format!(
+                "light sets balanced against the passes from the measured noise and costs (the first {} passes long)",
+                i.expert.resample_every
+            )
+        }
     );
     let _ = writeln!(
         md,
@@ -469,6 +493,7 @@ mod tests {
             threads: Some(1),
             seed: 5,
             out: dir.path().join("out"),
+            fixed_renewal: false,
             internal: InternalArgs {
                 lights: Some(256),
                 walks: Some(8),

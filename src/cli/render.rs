@@ -13,11 +13,11 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::args::{InternalArgs, TimedArgs};
 use super::support::{gpu_context, gpu_renderer};
-use crate::cpu::Renderer;
+use crate::cpu::{Passes, Renderer};
 use crate::render::export::{write_exr_with_metadata, write_image};
 use crate::render::film::image_mean;
 use crate::render::tonemap::ViewTransform;
-use crate::render::{internal_params, light_set, Film, PreparedScene};
+use crate::render::{internal_params, Film, PreparedScene};
 use crate::scene::{Method, RenderSettings, Scene};
 use crate::session::{renew_gpu_lights, Backend, LightBuilder, Renewal};
 
@@ -256,30 +256,42 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let start = Instant::now();
     let mut film = Film::new(w, h);
     let mut single = Film::new(w, h);
-    let mut pass = 0;
-    while rule.another(pass, t_build.elapsed().as_secs_f64()) {
-        let img = renderer
-            .pass(pass, &never)
+    let balanced = timed.time.is_some() && !timed.fixed_renewal;
+    let mut passes = Passes::new(&renderer, balanced, build_secs);
+    while rule.another(passes.passes(), t_build.elapsed().as_secs_f64()) {
+        let img = passes
+            .next(&renderer, &never)
             .context("render was cancelled")?;
         film.add_pass(&img.total);
         single.add_pass(&img.single);
-        if let (0, Some(n)) = (pass, rule.max_spp) {
+        if let (1, Some(n)) = (passes.passes(), rule.max_spp) {
             warn_long_render(start.elapsed().as_secs_f64(), n);
         }
         bar.inc(1);
-        pass += 1;
     }
     let spent = t_build.elapsed().as_secs_f64();
     bar.finish_and_clear();
     check_flights()?;
-    let sets = pass
-        .checked_sub(1)
-        .map_or(0, |last| light_set(&settings, last));
+    let sets = passes.last_set();
     if method == Method::Internal && sets > 0 {
-        println!(
-            "{sets} more light sets (one every {} passes), walked within the render time below",
-            settings.internal.expert.resample_every
-        );
+        match passes.balanced() {
+            None => println!(
+                "{sets} more light sets (one every {} passes), walked within the render time below",
+                settings.internal.expert.resample_every
+            ),
+            Some(b) => {
+                let estimates = b.estimates().map_or(String::new(), |e| {
+                    format!(
+                        " (per-pixel variance of a pass {:.3e}, of a set {:.3e}; {:.3} s a pass, {:.3} s a set)",
+                        e.pass_variance, e.set_variance, e.pass_secs, e.set_secs
+                    )
+                });
+                println!(
+                    "{sets} more light sets, balanced against the passes: the last {} passes long{estimates}, walked within the render time below",
+                    b.period()
+                );
+            }
+        }
     }
     let secs = start.elapsed().as_secs_f64();
     let samples = w as f64 * h as f64 * film.samples as f64;

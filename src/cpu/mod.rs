@@ -4,12 +4,15 @@
 //! threads. A [`Renderer`] owns what a render needs between passes: the
 //! prepared scene and, for the internal-lights method, the cached lights —
 //! renewed every `resample_every` passes when the settings ask for it, so
-//! that the walk noise averages out over the sets.
+//! that the walk noise averages out over the sets, or, for renders that
+//! stop at a time limit, on a schedule balanced while they run
+//! ([`Passes`], [`crate::render::renewal`]).
 
 pub mod pixel_lights;
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -18,6 +21,7 @@ use crate::physics::internal::gather::gather;
 use crate::physics::internal::sources::InternalLights;
 use crate::physics::reference::radiance_split;
 use crate::physics::rng::Rng;
+use crate::render::renewal::BalancedRenewal;
 use crate::render::{internal_params, internal_params_for_set, light_set, Film, PreparedScene};
 use crate::scene::{CameraFrame, Method, RenderSettings};
 
@@ -113,10 +117,20 @@ impl Renderer {
         pass: u32,
         cancel: &AtomicBool,
     ) -> Option<Option<Arc<InternalLights>>> {
+        self.lights_for_set(light_set(&self.settings, pass), cancel)
+    }
+
+    /// Light set `set` (`Some(None)` for the reference method), built here
+    /// the first time it is asked for; `None` if `cancel` is set while it
+    /// is built.
+    pub fn lights_for_set(
+        &self,
+        set: u32,
+        cancel: &AtomicBool,
+    ) -> Option<Option<Arc<InternalLights>>> {
         let Some(first) = &self.internal else {
             return Some(None);
         };
-        let set = light_set(&self.settings, pass);
         if set == 0 {
             return Some(Some(first.clone()));
         }
@@ -156,7 +170,14 @@ impl Renderer {
     /// Renders pass number `pass` (with the light set it falls in, see
     /// [`Renderer::lights_for_pass`]); `None` if `cancel` is set meanwhile.
     pub fn pass(&self, pass: u32, cancel: &AtomicBool) -> Option<PassImage> {
-        let lights = self.lights_for_pass(pass, cancel)?;
+        self.pass_in_set(pass, light_set(&self.settings, pass), cancel)
+    }
+
+    /// Renders pass number `pass` with light set `set` whatever the
+    /// settings' `resample_every` says (a [`Passes`] schedule's choice);
+    /// `None` if `cancel` is set meanwhile.
+    pub fn pass_in_set(&self, pass: u32, set: u32, cancel: &AtomicBool) -> Option<PassImage> {
+        let lights = self.lights_for_set(set, cancel)?;
         let lights = lights.as_deref();
         let cam = &self.prepared.camera;
         let width = cam.width as usize;
@@ -202,6 +223,75 @@ impl Renderer {
                 pixel_lights::light_shares(&self.prepared.volume, cache, cam.eye, dir)
             }
         }
+    }
+}
+
+/// Runs a renderer's passes one after another with its light sets renewed
+/// either every `resample_every` passes (as [`Renderer::pass`]) or, for a
+/// render that stops at a time limit, on a schedule balanced from the
+/// measured noise and costs ([`BalancedRenewal`]).
+pub struct Passes {
+    pass: u32,
+    set: u32,
+    balanced: Option<BalancedRenewal>,
+}
+
+impl Passes {
+    /// Passes of `renderer` from pass 0; `balanced` asks for the balanced
+    /// schedule, which applies to the internal-lights method with renewed
+    /// sets (`resample_every` > 0: it is the first sets' length);
+    /// `build_secs` is what set 0 took to build.
+    pub fn new(renderer: &Renderer, balanced: bool, build_secs: f64) -> Self {
+        let s = renderer.settings();
+        let every = s.internal.expert.resample_every;
+        let balanced = (balanced && s.method == Method::Internal && every > 0).then(|| {
+            let cam = &renderer.prepared().camera;
+            let mut b = BalancedRenewal::new(cam.width as usize * cam.height as usize, every);
+            b.add_set_build(build_secs);
+            b
+        });
+        Self {
+            pass: 0,
+            set: 0,
+            balanced,
+        }
+    }
+
+    /// Renders the next pass (building its light set first if it starts
+    /// one); `None` if `cancel` is set meanwhile.
+    pub fn next(&mut self, renderer: &Renderer, cancel: &AtomicBool) -> Option<PassImage> {
+        let Some(schedule) = &mut self.balanced else {
+            let img = renderer.pass(self.pass, cancel)?;
+            self.set = light_set(renderer.settings(), self.pass);
+            self.pass += 1;
+            return Some(img);
+        };
+        if self.pass > 0 && schedule.next_starts_set() {
+            self.set += 1;
+            let t = Instant::now();
+            renderer.lights_for_set(self.set, cancel)?;
+            schedule.add_set_build(t.elapsed().as_secs_f64());
+        }
+        let t = Instant::now();
+        let img = renderer.pass_in_set(self.pass, self.set, cancel)?;
+        schedule.add_pass(&img.total, t.elapsed().as_secs_f64());
+        self.pass += 1;
+        Some(img)
+    }
+
+    /// Passes rendered.
+    pub fn passes(&self) -> u32 {
+        self.pass
+    }
+
+    /// The light set of the last pass (0 before any).
+    pub fn last_set(&self) -> u32 {
+        self.set
+    }
+
+    /// The balanced schedule, if the passes follow one.
+    pub fn balanced(&self) -> Option<&BalancedRenewal> {
+        self.balanced.as_ref()
     }
 }
 

@@ -10,6 +10,7 @@ pub mod film;
 pub mod limits;
 pub mod plot;
 pub mod prepared;
+pub mod renewal;
 pub mod stats;
 pub mod tonemap;
 

@@ -1,0 +1,292 @@
+//! How often a time-limited render renews the internal lights' set
+//! ([method §7](crate::doc::method): the walk noise of one set averages out
+//! only over fresh sets), balanced from what the render measures while it
+//! runs.
+//!
+//! With `a` the per-pixel variance of one gather pass with one set, `b` the
+//! variance that one set adds to every pass it renders (its walk noise),
+//! `c` a pass's time and `d` a set's, a fresh set every `P` passes leaves
+//! `(a + bP)(c + d/P)/T` of variance after `T` seconds, least at
+//! `P* = √(ad/(bc))`. Thin media have small `b` and want long sets (the
+//! suite's wispy smoke ≈ 19 passes), a thick cumulus's walks are noisy and
+//! want a set every pass or two. [`BalancedRenewal`] estimates `a` from the
+//! spread of the passes within each set and `b` from the spread of the
+//! sets' means, pooled over the image's pixels, and sets `P` to `P*` after
+//! each set once three are done (the first sets last the settings'
+//! `resample_every` passes).
+//!
+//! The measured times make the schedule depend on the machine, so it is
+//! for renders that stop at a time limit (which do anyway); a render of a
+//! fixed sample count keeps the fixed `resample_every` and reproduces.
+
+use glam::Vec3;
+
+/// The longest set a balanced schedule chooses, in passes.
+pub const MAX_PERIOD: u32 = 64;
+
+/// Sets that must be complete before the period is balanced.
+const SETS_BEFORE_BALANCING: u32 = 3;
+
+/// The variance components and costs a balanced schedule is chosen from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenewalEstimates {
+    /// Per-pixel variance of one pass with one set, averaged over the image
+    /// (of the pixels' channel mean).
+    pub pass_variance: f64,
+    /// Per-pixel variance a set adds to each of its passes (may read
+    /// slightly negative where it is small next to `pass_variance`).
+    pub set_variance: f64,
+    /// Seconds per pass (the set's build not included).
+    pub pass_secs: f64,
+    /// Seconds per set's build.
+    pub set_secs: f64,
+}
+
+impl RenewalEstimates {
+    /// `P* = √(ad/(bc))` rounded and clamped to `1..=MAX_PERIOD`
+    /// (`MAX_PERIOD` where the sets add no measurable variance).
+    pub fn best_period(&self) -> u32 {
+        let (a, b, c, d) = (
+            self.pass_variance,
+            self.set_variance,
+            self.pass_secs,
+            self.set_secs,
+        );
+        if b.is_nan() || b <= 0.0 || c.is_nan() || c <= 0.0 {
+            return MAX_PERIOD;
+        }
+        let p = (a.max(0.0) * d.max(0.0) / (b * c)).sqrt();
+        if p.is_finite() {
+            (p.round() as u32).clamp(1, MAX_PERIOD)
+        } else {
+            MAX_PERIOD
+        }
+    }
+}
+
+/// A light-set schedule balanced while the render runs (see the module).
+/// Feed it every pass ([`BalancedRenewal::add_pass`]) and every set's build
+/// time ([`BalancedRenewal::add_set_build`], set 0's included); before
+/// each pass after the first ask [`BalancedRenewal::next_starts_set`].
+#[derive(Clone, Debug)]
+pub struct BalancedRenewal {
+    period: u32,
+    /// The current set's per-pixel sum and sum of squares, and its passes.
+    sum: Vec<f64>,
+    squares: Vec<f64>,
+    passes_in_set: u32,
+    /// Pooled within-set sum of squared deviations and its degrees of
+    /// freedom.
+    within: f64,
+    within_dof: f64,
+    /// Per pixel the sum and the sum of squares of the complete sets'
+    /// means; the sets and `Σ 1/n_s`.
+    set_means: Vec<f64>,
+    set_mean_squares: Vec<f64>,
+    sets: u32,
+    inverse_lengths: f64,
+    /// Time spent in passes and in builds, and their counts.
+    pass_secs: f64,
+    passes: u32,
+    build_secs: f64,
+    builds: u32,
+}
+
+impl BalancedRenewal {
+    /// A schedule for an image of `pixels` pixels whose first sets last
+    /// `first_period` passes (at least 2, so that a set's passes measure
+    /// the gather's own noise).
+    pub fn new(pixels: usize, first_period: u32) -> Self {
+        Self {
+            period: first_period.max(2),
+            sum: vec![0.0; pixels],
+            squares: vec![0.0; pixels],
+            passes_in_set: 0,
+            within: 0.0,
+            within_dof: 0.0,
+            set_means: vec![0.0; pixels],
+            set_mean_squares: vec![0.0; pixels],
+            sets: 0,
+            inverse_lengths: 0.0,
+            pass_secs: 0.0,
+            passes: 0,
+            build_secs: 0.0,
+            builds: 0,
+        }
+    }
+
+    /// The current set's length in passes.
+    pub fn period(&self) -> u32 {
+        self.period
+    }
+
+    /// Sets complete so far.
+    pub fn complete_sets(&self) -> u32 {
+        self.sets
+    }
+
+    /// Adds one pass of the current set: its image (one value per pixel)
+    /// and the seconds it took.
+    pub fn add_pass(&mut self, image: &[Vec3], secs: f64) {
+        for ((s, q), v) in self.sum.iter_mut().zip(&mut self.squares).zip(image) {
+            let x = f64::from(v.x + v.y + v.z) / 3.0;
+            *s += x;
+            *q += x * x;
+        }
+        self.passes_in_set += 1;
+        self.pass_secs += secs;
+        self.passes += 1;
+    }
+
+    /// Adds the seconds one set's build took.
+    pub fn add_set_build(&mut self, secs: f64) {
+        self.build_secs += secs;
+        self.builds += 1;
+    }
+
+    /// Whether the next pass starts a new set: the current one has its
+    /// passes. If so, the current set's statistics are closed and the
+    /// period rebalanced.
+    pub fn next_starts_set(&mut self) -> bool {
+        if self.passes_in_set < self.period {
+            return false;
+        }
+        self.close_set();
+        if let Some(e) = self.estimates() {
+            self.period = e.best_period();
+        }
+        true
+    }
+
+    fn close_set(&mut self) {
+        let n = f64::from(self.passes_in_set);
+        if n == 0.0 {
+            return;
+        }
+        let pixels = self.sum.len();
+        for i in 0..pixels {
+            let (s, q) = (self.sum[i], self.squares[i]);
+            let m = s / n;
+            self.within += (q - s * m).max(0.0);
+            self.set_means[i] += m;
+            self.set_mean_squares[i] += m * m;
+        }
+        self.within_dof += pixels as f64 * (n - 1.0);
+        self.sets += 1;
+        self.inverse_lengths += 1.0 / n;
+        self.sum.fill(0.0);
+        self.squares.fill(0.0);
+        self.passes_in_set = 0;
+    }
+
+    /// The estimates once three sets are complete, at least one with two
+    /// passes, and a build has been timed. The set means' spread is
+    /// `b + a · mean(1/n_s)` (independent sets of `n_s` passes, each
+    /// mean's variance `b + a/n_s`), which gives `b`.
+    pub fn estimates(&self) -> Option<RenewalEstimates> {
+        if self.sets < SETS_BEFORE_BALANCING
+            || self.within_dof <= 0.0
+            || self.builds == 0
+            || self.passes == 0
+            || self.sum.is_empty()
+        {
+            return None;
+        }
+        let k = f64::from(self.sets);
+        let a = self.within / self.within_dof;
+        let spread: f64 = self
+            .set_means
+            .iter()
+            .zip(&self.set_mean_squares)
+            .map(|(&s, &q)| (q - s * s / k).max(0.0))
+            .sum::<f64>()
+            / (self.sum.len() as f64 * (k - 1.0));
+        Some(RenewalEstimates {
+            pass_variance: a,
+            set_variance: spread - a * self.inverse_lengths / k,
+            pass_secs: self.pass_secs / f64::from(self.passes),
+            set_secs: self.build_secs / f64::from(self.builds),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::physics::rng::Rng;
+
+    /// A standard normal draw (Box–Muller).
+    fn normal(rng: &mut Rng) -> f64 {
+        let (u1, u2) = (rng.next_f32().max(1e-7) as f64, rng.next_f32() as f64);
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+
+    /// Passes made of a per-pixel set effect of variance `b`, shared by a
+    /// set's passes, plus independent pass noise of variance `a`: the
+    /// schedule recovers both (within 10 %) and chooses `√(ad/(bc))`.
+    #[test]
+    fn recovers_the_variance_components_and_the_best_period() {
+        let (a, b, c, d) = (4.0f64, 0.25f64, 0.1f64, 0.4f64);
+        let pixels = 4096;
+        let mut rng = Rng::for_sample(5, 0, 0);
+        let mut renewal = BalancedRenewal::new(pixels, 2);
+        renewal.add_set_build(d);
+        let mut effect: Vec<f64> = (0..pixels).map(|_| b.sqrt() * normal(&mut rng)).collect();
+        let mut periods = Vec::new();
+        for pass in 0..200 {
+            if pass > 0 && renewal.next_starts_set() {
+                periods.push(renewal.period());
+                for e in &mut effect {
+                    *e = b.sqrt() * normal(&mut rng);
+                }
+                renewal.add_set_build(d);
+            }
+            let image: Vec<Vec3> = effect
+                .iter()
+                .map(|&e| Vec3::splat((1.0 + e + a.sqrt() * normal(&mut rng)) as f32))
+                .collect();
+            renewal.add_pass(&image, c);
+        }
+        let e = renewal.estimates().expect("estimates after 200 passes");
+        assert!((e.pass_variance / a - 1.0).abs() < 0.1, "{e:?}");
+        assert!((e.set_variance / b - 1.0).abs() < 0.1, "{e:?}");
+        assert!((e.pass_secs - c).abs() < 1e-9 && (e.set_secs - d).abs() < 1e-9);
+        // √(4 · 0.4 / (0.25 · 0.1)) = 8.
+        assert_eq!(e.best_period(), 8, "{e:?}");
+        assert_eq!(
+            &periods[..2],
+            &[2, 2],
+            "the first sets keep the given period"
+        );
+        assert!(
+            periods[periods.len() - 3..]
+                .iter()
+                .all(|&p| (7..=9).contains(&p)),
+            "{periods:?}"
+        );
+    }
+
+    /// Without set noise the sets grow to the longest period; with set
+    /// noise that dominates, one pass per set.
+    #[test]
+    fn the_period_follows_the_balance() {
+        let none = RenewalEstimates {
+            pass_variance: 1.0,
+            set_variance: -0.001,
+            pass_secs: 0.1,
+            set_secs: 0.4,
+        };
+        assert_eq!(none.best_period(), MAX_PERIOD);
+        let heavy = RenewalEstimates {
+            set_variance: 10.0,
+            ..none
+        };
+        assert_eq!(heavy.best_period(), 1);
+        let cheap_sets = RenewalEstimates {
+            set_variance: 0.01,
+            set_secs: 0.0,
+            ..none
+        };
+        assert_eq!(cheap_sets.best_period(), 1, "free sets: renew every pass");
+    }
+}
