@@ -136,3 +136,109 @@ fn renewals_start_every_p_passes() {
     assert_eq!(starts(&settings), vec![(4, 1), (8, 2), (12, 3)]);
     assert_eq!(lantern::render::light_set(&settings, 11), 2);
 }
+
+/// The balanced schedule of time-limited renders (`render::renewal`) on
+/// real passes, with its times given (so that what it decides does not
+/// depend on the machine): its estimate of a pass's variance matches the
+/// spread of one set's passes measured directly, its estimate of a set's
+/// variance the spread of independent sets' images, and its period is
+/// `√(ad/(bc))` of those. `cpu::Passes` without balancing renders
+/// `Renderer::pass`'s very passes; with it, fresh sets as it decides.
+#[test]
+fn balanced_renewal_measures_the_noise_of_passes_and_sets() {
+    use lantern::cpu::{Passes, Renderer};
+    use lantern::render::renewal::BalancedRenewal;
+    use std::sync::atomic::AtomicBool;
+
+    let prepared = noisy_lights();
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    settings.seed = 4;
+    settings.internal.expert.resample_every = 2;
+    let never = AtomicBool::new(false);
+    let renderer = Renderer::new(prepared.clone(), &settings, &never).unwrap();
+    let luminance = |img: &[glam::Vec3]| -> Vec<f64> {
+        img.iter()
+            .map(|v| f64::from(v.x + v.y + v.z) / 3.0)
+            .collect()
+    };
+    let pass = |p: u32, set: u32| luminance(&renderer.pass_in_set(p, set, &never).unwrap().total);
+    let pixels = 16 * 16;
+
+    // Directly: a from 64 passes of set 0, b from 32 sets of 16 passes.
+    let one_set: Vec<Vec<f64>> = (0..64).map(|p| pass(p, 0)).collect();
+    let a = (0..pixels)
+        .map(|i| {
+            let m = one_set.iter().map(|x| x[i]).sum::<f64>() / 64.0;
+            one_set.iter().map(|x| (x[i] - m).powi(2)).sum::<f64>() / 63.0
+        })
+        .sum::<f64>()
+        / pixels as f64;
+    let (sets, per_set) = (32u32, 16u32);
+    let means: Vec<Vec<f64>> = (0..sets)
+        .map(|s| {
+            let mut m = vec![0.0; pixels];
+            for p in 0..per_set {
+                for (mi, x) in m.iter_mut().zip(pass(10_000 + s * per_set + p, 100 + s)) {
+                    *mi += x / f64::from(per_set);
+                }
+            }
+            m
+        })
+        .collect();
+    let spread = (0..pixels)
+        .map(|i| {
+            let m = means.iter().map(|x| x[i]).sum::<f64>() / f64::from(sets);
+            means.iter().map(|x| (x[i] - m).powi(2)).sum::<f64>() / f64::from(sets - 1)
+        })
+        .sum::<f64>()
+        / pixels as f64;
+    let b = spread - a / f64::from(per_set);
+    assert!(
+        b > 0.02 * a,
+        "one walk per light: the sets' noise shows (a {a:e}, b {b:e})"
+    );
+
+    // The schedule, fed 640 passes with a set's build 4 passes long.
+    let (c, d) = (1.0, 4.0);
+    let mut renewal = BalancedRenewal::new(pixels, 2);
+    renewal.add_set_build(d);
+    let mut set = 0;
+    for p in 0..640 {
+        if p > 0 && renewal.next_starts_set() {
+            set += 1;
+            renewal.add_set_build(d);
+        }
+        let img = renderer.pass_in_set(p, 200 + set, &never).unwrap();
+        renewal.add_pass(&img.total, c);
+    }
+    let e = renewal.estimates().expect("estimates after 640 passes");
+    eprintln!(
+        "direct: a {a:.4e}, b {b:.4e}; schedule: {e:?}, period {}, {set} sets",
+        renewal.period()
+    );
+    assert!((e.pass_variance / a - 1.0).abs() < 0.1, "a {a:e}: {e:?}");
+    assert!((e.set_variance / b - 1.0).abs() < 0.35, "b {b:e}: {e:?}");
+    let best = (a * d / (b * c)).sqrt();
+    assert!(
+        (renewal.period() as f64 - best).abs() <= 0.35 * best + 1.0,
+        "period {} against √(ad/(bc)) = {best:.2}",
+        renewal.period()
+    );
+
+    // The driver: without balancing, Renderer::pass's passes and sets.
+    let mut fixed = Passes::new(&renderer, false, 0.0);
+    for p in 0..5 {
+        let img = fixed.next(&renderer, &never).unwrap();
+        assert_eq!(img.total, renderer.pass(p, &never).unwrap().total);
+    }
+    assert_eq!((fixed.passes(), fixed.last_set()), (5, 2));
+    // With it, the first sets last `resample_every` passes.
+    let mut balanced = Passes::new(&renderer, true, 0.01);
+    for _ in 0..6 {
+        let img = balanced.next(&renderer, &never).unwrap();
+        assert!(img.total.iter().all(|v| v.is_finite()));
+    }
+    assert_eq!(balanced.last_set(), 2);
+    assert_eq!(balanced.balanced().map(|b| b.complete_sets()), Some(2));
+}
