@@ -409,15 +409,13 @@ fn agree_gather_prepared(
     let cpu = common::gather_cpu(&prepared, &settings, &cache, spp * CPU_SPP_PER_GPU_SPP);
     let cpu_secs = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let mut renderer = GpuRenderer::internal(
+    let image = common::gpu_gather(
         &ctx,
         &prepared,
         &cache,
         settings.internal.expert.light_samples,
-        2,
-    )
-    .unwrap_or_else(|e| panic!("{e:#}"));
-    let image = common::gpu_render(&mut renderer, spp);
+        spp,
+    );
     let gpu_secs = t.elapsed().as_secs_f64();
     common::compare_backends(
         &format!(
@@ -1480,9 +1478,7 @@ fn passes_cut_short_by_the_driver_are_reported() {
         let mut lights = (*cache).clone();
         lights.params.window_scatters = window_scatters;
         let cache = Arc::new(lights);
-        let mut renderer = GpuRenderer::internal(&ctx, &prepared, &cache, light_samples, 2)
-            .unwrap_or_else(|e| panic!("{e:#}"));
-        common::gpu_render(&mut renderer, 2).cut_short_passes()
+        common::gpu_gather(&ctx, &prepared, &cache, light_samples, 2).cut_short_passes()
     };
     let heavy = cut_at(32, 3);
     let defaults = cut_at(4, 2);

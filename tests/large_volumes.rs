@@ -146,15 +146,13 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
     drop(renderer);
 
     let t = Instant::now();
-    let mut renderer = GpuRenderer::internal(
+    let image = common::gpu_gather(
         &ctx,
         &prepared,
         &cache,
         settings.internal.expert.light_samples,
-        2,
-    )
-    .unwrap_or_else(|e| panic!("{e:#}"));
-    let image = common::gpu_render(&mut renderer, spp);
+        spp,
+    );
     println!(
         "GPU gather {spp} spp in {:.2} s (upload included); single {:?}; peak RSS {:.0} MiB",
         t.elapsed().as_secs_f64(),

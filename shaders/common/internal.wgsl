@@ -34,18 +34,17 @@ fn eval_s1(i: u32, n: vec3<f32>) -> vec3<f32> {
     }
     if gather_params.has_sky != 0u {
         // Funk–Hecke: the phase function scales the sky's band `l` by
-        // `g^l`.
+        // `g^l`; the basis is scaled so, and the sky's series evaluated
+        // like the lights' own.
         var y = sh_basis(gather_params.sh_order, n);
-        let base = gather_params.sky_offset + i * gather_params.sh_count;
-        var from_sky = vec3<f32>(0.0);
         var g_l = 1.0;
-        for (var l = 0u; l <= gather_params.sh_order; l++) {
-            for (var k = l * l; k < (l + 1u) * (l + 1u); k++) {
-                from_sky += internal_vec4[base + k].xyz * (g_l * y[k]);
-            }
+        for (var l = 1u; l <= gather_params.sh_order; l++) {
             g_l *= gather_params.g;
+            for (var k = l * l; k < (l + 1u) * (l + 1u); k++) {
+                y[k] *= g_l;
+            }
         }
-        sum += max(from_sky, vec3<f32>(0.0));
+        sum += max(eval_sh(gather_params.sky_offset, i, &y), vec3<f32>(0.0));
     }
     return sum * gather_params.scatter * light.density;
 }

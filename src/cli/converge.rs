@@ -460,7 +460,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
         i.expert.l1,
         i.expert.window_scatters,
         i.expert.view_walks,
-        renewal_text(i.expert.resample_every)
+        renewal_text(i.expert.resample_every, false)
     );
     let _ = writeln!(
         report,

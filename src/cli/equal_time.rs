@@ -379,14 +379,7 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
         i.expert.clock,
         i.expert.l1,
         i.expert.light_samples,
-        if args.fixed_renewal || i.expert.resample_every == 0 {
-            renewal_text(i.expert.resample_every)
-        } else {
-            format!(
-                "light sets balanced against the passes from the measured noise and costs (the first {} passes long)",
-                i.expert.resample_every
-            )
-        }
+        renewal_text(i.expert.resample_every, !args.fixed_renewal)
     );
     let _ = writeln!(
         md,

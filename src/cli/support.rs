@@ -145,11 +145,15 @@ pub fn variance_path(converged: &Path) -> PathBuf {
 }
 
 /// How often a render renews its internal lights, in words (the reports'
-/// settings line).
-pub fn renewal_text(resample_every: u32) -> String {
-    match resample_every {
-        0 => "one light set".to_owned(),
-        p => format!("a fresh light set every {p} passes"),
+/// settings line); `balanced`: on the schedule of time-limited renders
+/// ([`crate::cpu::Passes`]), whose first sets last `resample_every` passes.
+pub fn renewal_text(resample_every: u32, balanced: bool) -> String {
+    match (resample_every, balanced) {
+        (0, _) => "one light set".to_owned(),
+        (p, false) => format!("a fresh light set every {p} passes"),
+        (p, true) => format!(
+            "light sets balanced against the passes from the measured noise and costs (the first {p} passes long)"
+        ),
     }
 }
 

@@ -108,21 +108,9 @@ impl Renderer {
         self.internal.as_ref()
     }
 
-    /// The internal lights that render pass `pass` (`Some(None)` for the
-    /// reference method): light set 0, or the pass's later set, built here
-    /// the first time a pass needs it. `None` if `cancel` is set while it
-    /// is built.
-    pub fn lights_for_pass(
-        &self,
-        pass: u32,
-        cancel: &AtomicBool,
-    ) -> Option<Option<Arc<InternalLights>>> {
-        self.lights_for_set(light_set(&self.settings, pass), cancel)
-    }
-
-    /// Light set `set` (`Some(None)` for the reference method), built here
-    /// the first time it is asked for; `None` if `cancel` is set while it
-    /// is built.
+    /// Light set `set` (`Some(None)` for the reference method): set 0, or
+    /// a later set, built here the first time it is asked for (the latest
+    /// one is kept). `None` if `cancel` is set while it is built.
     pub fn lights_for_set(
         &self,
         set: u32,
@@ -167,8 +155,9 @@ impl Renderer {
         }
     }
 
-    /// Renders pass number `pass` (with the light set it falls in, see
-    /// [`Renderer::lights_for_pass`]); `None` if `cancel` is set meanwhile.
+    /// Renders pass number `pass` with the light set it falls in
+    /// ([`light_set`]: a fresh one every `resample_every` passes, built by
+    /// [`Renderer::lights_for_set`]); `None` if `cancel` is set meanwhile.
     pub fn pass(&self, pass: u32, cancel: &AtomicBool) -> Option<PassImage> {
         self.pass_in_set(pass, light_set(&self.settings, pass), cancel)
     }

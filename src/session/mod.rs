@@ -8,7 +8,7 @@
 //!   `resample_every` passes (method §7's averaging of the walk noise over
 //!   light sets) for a GPU renderer, written once for the command line and
 //!   the previewer (the CPU renderer renews its own sets in
-//!   [`crate::cpu::Renderer::lights_for_pass`], on the same schedule,
+//!   [`crate::cpu::Renderer::pass`], on the same schedule,
 //!   [`crate::render::light_set`]).
 //! - [`worker`]: the previewer's render session, a worker thread owning
 //!   the renderers and films, jobs, cancellation, the low-resolution

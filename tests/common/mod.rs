@@ -180,6 +180,20 @@ pub fn gpu_render(renderer: &mut lantern::gpu::GpuRenderer, spp: u32) -> lantern
     renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"))
 }
 
+/// The internal-lights gather on the GPU with `cache` (uploaded once),
+/// `light_samples` per camera sample and seed 2: `spp` passes, read back.
+pub fn gpu_gather(
+    ctx: &lantern::gpu::GpuContext,
+    prepared: &PreparedScene,
+    cache: &lantern::physics::internal::sources::InternalLights,
+    light_samples: u32,
+    spp: u32,
+) -> lantern::gpu::GpuImage {
+    let mut renderer = lantern::gpu::GpuRenderer::internal(ctx, prepared, cache, light_samples, 2)
+        .unwrap_or_else(|e| panic!("{e:#}"));
+    gpu_render(&mut renderer, spp)
+}
+
 /// A homogeneous sphere of `radius` at the origin with `optics` (8
 /// majorant cells along each axis).
 pub fn sphere(

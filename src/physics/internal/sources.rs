@@ -993,19 +993,19 @@ impl InternalLights {
         });
         if !self.sky.is_empty() {
             // Funk–Hecke: the phase function scales the sky's band `l`
-            // by `g^l`.
+            // by `g^l`; the basis is scaled so, and the sky's series
+            // evaluated like the lights' own.
             let mut y = [0.0f32; MAX_COUNT];
             sh_basis(self.sh_order, n, &mut y);
-            let c = &self.sky[i * self.sh_count..(i + 1) * self.sh_count];
-            let mut from_sky = Vec3::ZERO;
             let mut g_l = 1.0;
-            for l in 0..=self.sh_order as usize {
-                for k in l * l..(l + 1) * (l + 1) {
-                    from_sky += c[k] * (g_l * y[k]);
-                }
+            for l in 1..=self.sh_order as usize {
                 g_l *= self.g;
+                for yk in &mut y[l * l..(l + 1) * (l + 1)] {
+                    *yk *= g_l;
+                }
             }
-            sum += from_sky.max(Vec3::ZERO);
+            let c = &self.sky[i * self.sh_count..(i + 1) * self.sh_count];
+            sum += Self::eval_sh(c, &y).max(Vec3::ZERO);
         }
         sum * self.scatter * light.density
     }
