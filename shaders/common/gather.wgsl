@@ -218,11 +218,19 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     // the window, ratio-tracked transmittance from `x`.
     // The strata from the window's far end back, so that the collided
     // part's chances share one march (`ChancesAlongRay`).
+    // The points' jitters are the stream's next `samples` numbers, drawn
+    // in order as on the CPU (which places every point first) and read
+    // back here from the last (`rng_previous_f32`), so that both backends
+    // give a camera sample the same numbers for the same things.
     var points = points_along(clock, x, dir, 0.0, window);
     var chances = chances_along_ray(x, dir, len, s_star);
+    for (var j = 0u; j < samples; j++) {
+        rng_next_u32(rng);
+    }
+    var jitters = *rng;
     for (var jj = 0u; jj < samples; jj++) {
         let j = samples - 1u - jj;
-        let ts = segment_sample(&points, (f32(j) + rng_next_f32(rng)) / f32(samples));
+        let ts = segment_sample(&points, (f32(j) + rng_previous_f32(&jitters)) / f32(samples));
         let t = ts.x;
         let step = ts.y / f32(samples);
         let y = x + dir * t;

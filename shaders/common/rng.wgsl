@@ -31,6 +31,21 @@ fn rng_next_u32(rng: ptr<function, Rng>) -> u32 {
     return (word >> 22u) ^ word;
 }
 
+// The number before the stream's current position, stepping the stream
+// back over it (`Rng::previous_u32`): the LCG run backwards, its
+// multiplier's inverse modulo 2³² being 3425435293.
+fn rng_previous_u32(rng: ptr<function, Rng>) -> u32 {
+    let old = ((*rng).state - 2891336453u) * 3425435293u;
+    (*rng).state = old;
+    let word = ((old >> ((old >> 28u) + 4u)) ^ old) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+// `rng_previous_u32` as a uniform number in [0, 1) (`Rng::previous_f32`).
+fn rng_previous_f32(rng: ptr<function, Rng>) -> f32 {
+    return f32(rng_previous_u32(rng) >> 8u) * (1.0 / 16777216.0);
+}
+
 // A uniform number in [0, 1) (`Rng::next_f32`).
 fn rng_next_f32(rng: ptr<function, Rng>) -> f32 {
     return f32(rng_next_u32(rng) >> 8u) * (1.0 / 16777216.0);

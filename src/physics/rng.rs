@@ -49,11 +49,52 @@ impl Rng {
     pub fn next_f32(&mut self) -> f32 {
         (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
     }
+
+    /// The number [`Rng::next_u32`] returned last, stepping the stream back
+    /// over it: the LCG run backwards (`3_425_435_293` is its multiplier's
+    /// inverse modulo 2³²). A pass that draws a block of numbers up front
+    /// and uses them in reverse order reads them back this way without
+    /// storing them (the GPU gather's jitters).
+    #[inline]
+    pub fn previous_u32(&mut self) -> u32 {
+        let old = self
+            .state
+            .wrapping_sub(2_891_336_453)
+            .wrapping_mul(3_425_435_293);
+        self.state = old;
+        let word = ((old >> ((old >> 28) + 4)) ^ old).wrapping_mul(277_803_737);
+        (word >> 22) ^ word
+    }
+
+    /// [`Rng::previous_u32`] as a uniform number in [0, 1), the same
+    /// number [`Rng::next_f32`] made of it.
+    #[inline]
+    pub fn previous_f32(&mut self) -> f32 {
+        (self.previous_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stepping_back_returns_the_same_numbers_in_reverse() {
+        let mut r = Rng::for_sample(7, 11, 13);
+        let start = r.clone();
+        let ahead: Vec<f32> = (0..1000).map(|_| r.next_f32()).collect();
+        let mut back = r.clone();
+        let behind: Vec<f32> = (0..1000).map(|_| back.previous_f32()).collect();
+        assert!(ahead.iter().rev().eq(behind.iter()));
+        assert_eq!(back.state, start.state);
+        assert_eq!(r.next_u32(), {
+            let mut again = back.clone();
+            for _ in 0..1000 {
+                again.next_u32();
+            }
+            again.next_u32()
+        });
+    }
 
     #[test]
     fn uniform_moments_and_streams_differ() {

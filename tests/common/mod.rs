@@ -228,3 +228,101 @@ pub fn mean_stderr(n: usize, mut f: impl FnMut(usize) -> Vec3) -> (Vec3, Vec3) {
         Vec3::new(e[0] as f32, e[1] as f32, e[2] as f32),
     )
 }
+
+/// What [`compare_same_streams`] measured.
+#[derive(Clone, Copy, Debug)]
+pub struct SameStreams {
+    /// Pixel passes compared (every pixel of every pass).
+    pub pixel_passes: usize,
+    /// The share of them whose estimates agree to 1e-3 of their size (or
+    /// both below 1e-9): the same random numbers spent on the same things.
+    pub identical: f64,
+    /// The mean of the GPU's estimate less the CPU's, per channel, as a
+    /// share of the CPU's mean.
+    pub relative_difference: Vec3,
+    /// That difference over its standard error (pixel passes taken as
+    /// independent), per channel.
+    pub z: Vec3,
+}
+
+/// Renders passes `0..passes` one at a time on the GPU (accumulation reset
+/// before each, so that what is read back is the pass itself) and on the
+/// CPU with the same `seed`: the backends draw the same random numbers for
+/// each pixel of each pass ([`lantern::physics::rng::Rng::for_sample`]),
+/// and where they also spend them on the same things in the same order,
+/// they return the same estimate up to floating-point rounding. Checks
+/// that no pass was cut short and that at least `min_identical` of the
+/// pixel passes agree to 1e-3, and that the mean differs by less than
+/// 0.1 % (paired, so its standard error is a small fraction of two
+/// independent images'; rounding alone moves it by about 1e-7); returns
+/// the numbers.
+pub fn compare_same_streams(
+    label: &str,
+    gpu: &mut lantern::gpu::GpuRenderer,
+    cpu: &lantern::cpu::Renderer,
+    seed: u64,
+    passes: u32,
+    min_identical: f64,
+) -> SameStreams {
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let (mut n, mut same) = (0usize, 0usize);
+    let (mut sum_d, mut sum_d2, mut sum_cpu) = ([0.0f64; 3], [0.0f64; 3], [0.0f64; 3]);
+    for pass in 0..passes {
+        gpu.reset(seed);
+        gpu.add_pass(pass);
+        let image = gpu.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(
+            image.cut_short_passes(),
+            0,
+            "{label}: pass {pass} cut short"
+        );
+        let theirs = cpu.pass(pass, &never).expect("not cancelled").total;
+        for (accum, c) in image.pixels.iter().zip(&theirs) {
+            let g = accum.mean();
+            let size = g.abs().max(c.abs()).max_element();
+            if size < 1e-9 || (g - *c).abs().max_element() <= 1e-3 * size {
+                same += 1;
+            }
+            for ch in 0..3 {
+                let d = (g[ch] - c[ch]) as f64;
+                sum_d[ch] += d;
+                sum_d2[ch] += d * d;
+                sum_cpu[ch] += c[ch] as f64;
+            }
+            n += 1;
+        }
+    }
+    let nf = n as f64;
+    let mut rel = [0.0f32; 3];
+    let mut z = [0.0f32; 3];
+    for ch in 0..3 {
+        let m = sum_d[ch] / nf;
+        let se = ((sum_d2[ch] / nf - m * m).max(0.0) / nf).sqrt();
+        rel[ch] = (sum_d[ch] / sum_cpu[ch].max(1e-30)) as f32;
+        z[ch] = if se > 0.0 { (m / se) as f32 } else { 0.0 };
+    }
+    let out = SameStreams {
+        pixel_passes: n,
+        identical: same as f64 / nf,
+        relative_difference: Vec3::from(rel),
+        z: Vec3::from(z),
+    };
+    println!(
+        "{label}: same random numbers, {passes} passes: {:.4} of {n} pixel passes identical; GPU − CPU {:+.4?} % of the mean (z {:.2?})",
+        out.identical,
+        (out.relative_difference * 100.0).to_array(),
+        out.z.to_array()
+    );
+    assert!(
+        out.identical >= min_identical,
+        "{label}: only {:.4} of pixel passes identical (at least {min_identical})",
+        out.identical
+    );
+    assert!(
+        out.relative_difference.abs().max_element() < 1e-3,
+        "{label}: GPU − CPU {:?} of the mean, z {:?}",
+        out.relative_difference,
+        out.z
+    );
+    out
+}
