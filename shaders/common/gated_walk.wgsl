@@ -24,6 +24,16 @@ fn clock_step(cell: f32, m: f32, s_star: f32) -> f32 {
     return cell;
 }
 
+// The phase in (0, 1] of the optical-depth clock's lattice along a ray, a
+// hash of its direction (`lattice_phase`): every march along one ray
+// measures the same clock, neighbouring rays unrelated ones.
+fn lattice_phase(dir: vec3<f32>) -> f32 {
+    var s = pcg_hash(bitcast<u32>(dir.z) >> PHASE_DROPPED_BITS);
+    s = pcg_hash((bitcast<u32>(dir.y) >> PHASE_DROPPED_BITS) ^ s);
+    s = pcg_hash((bitcast<u32>(dir.x) >> PHASE_DROPPED_BITS) ^ s);
+    return 1.0 - f32(s >> 8u) * (1.0 / 16777216.0);
+}
+
 // Most gates a walk on the GPU records, `N + 1` (a private array per
 // invocation): `GPU_MAX_GATES`, from Rust (the generated prelude:
 // crate::gpu::walks::GPU_MAX_TERMS + 1; src/gpu/walks.rs refuses larger `N`
@@ -87,6 +97,7 @@ fn march_clock(
     let cell = (m.majorant_max - m.majorant_min) / vec3<f32>(m.majorant_res);
     let cell_min = max(min(min(cell.x, cell.y), cell.z), 1e-12);
     let sigma_g = max_element(m.sigma_t);
+    let phase = lattice_phase(dir);
     var acc = 0.0;
     var it = dda_start(origin, dir, t0, t_exit);
     loop {
@@ -106,12 +117,27 @@ fn march_clock(
         let h = clock_step(cell_min, seg.majorant, s_star);
         var i = 0u;
         loop {
-            let p0 = a + f32(i) * h;
+            // The lattice's `i`-th step in the cell and where its rate is
+            // sampled (`lattice_step`): a whole step at its middle, the
+            // first and the last step that the cell's faces cut where
+            // each point of the cell weighs once over the phase.
+            var p0 = a;
+            if i > 0u {
+                p0 = a + (f32(i) - 1.0 + phase) * h;
+            }
             if p0 >= b {
                 break;
             }
-            let p1 = min(a + f32(i + 1u) * h, b);
-            let c = sigma_g * density(origin + dir * (0.5 * (p0 + p1)));
+            let lattice_end = a + (f32(i) + phase) * h;
+            let p1 = min(lattice_end, b);
+            var at = 0.5 * (p0 + p1);
+            if i == 0u && lattice_end < b {
+                at = a + 0.5 * phase * phase * h;
+            } else if i > 0u && lattice_end >= b {
+                let l = max(b - p0, 0.0);
+                at = b - 0.5 * l * l / h;
+            }
+            let c = sigma_g * density(origin + dir * at);
             let end = min(p1, t_stop);
             let d_tau = c * max(end - p0, 0.0);
             if c > 0.0 && acc + d_tau >= budget {

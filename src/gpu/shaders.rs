@@ -201,6 +201,11 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
         crate::physics::internal::clock::CLOCK_MAX_STEPS
     ),
     shared!(
+        "PHASE_DROPPED_BITS",
+        U32,
+        crate::physics::internal::clock::PHASE_DROPPED_BITS
+    ),
+    shared!(
         "COLLISION_FLOOR",
         F32,
         crate::physics::internal::chances::COLLISION_FLOOR
