@@ -15,8 +15,9 @@
 //!
 //! Cases per format: [`DEFAULT_CASES`], or `PROPTEST_CASES` (the README's
 //! long run: `PROPTEST_CASES=100000 cargo test --release --test
-//! fuzz_loaders`). A failing case prints its input's length and the seed
-//! of the run; proptest shrinks it first.
+//! fuzz_loaders`). The runs are seeded with [`FUZZ_SEED`], so that a
+//! failure reproduces; `PROPTEST_RNG_SEED=N` explores other seeds. A
+//! failing case prints its input's length; proptest shrinks it first.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -27,7 +28,7 @@ use std::time::{Duration, Instant};
 use lantern::scene::volume::{load_grid, MAX_BYTES};
 use lantern::scene::{GridFormat, Scene, VoxelGrid};
 use proptest::prelude::*;
-use proptest::test_runner::{Config, TestCaseError, TestRunner};
+use proptest::test_runner::{Config, RngSeed, TestCaseError, TestRunner};
 
 /// Cases per format in a normal test run (about 15 s in all on
 /// two cores, in release).
@@ -418,9 +419,18 @@ fn cases() -> u32 {
         .unwrap_or(DEFAULT_CASES)
 }
 
+/// The seed of every fuzz run: fixed, so that a failure in CI reproduces
+/// with the same command; `PROPTEST_RNG_SEED` (a `u64`) explores others.
+const FUZZ_SEED: u64 = 0x6c61_6e74_6572_6e21;
+
 fn runner() -> TestRunner {
+    let seed = std::env::var("PROPTEST_RNG_SEED")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(FUZZ_SEED);
     TestRunner::new(Config {
         cases: cases(),
+        rng_seed: RngSeed::Fixed(seed),
         failure_persistence: None,
         // Shrinking re-runs cases; a few hundred steps are plenty.
         max_shrink_iters: 256,
@@ -612,6 +622,49 @@ fn fuzz_scenes() {
     if let Err(e) = result {
         panic!("scenes: {e}");
     }
+}
+
+/// Regression (fuzz_vdb_half): `Field32(3062324873471125363, i32::MAX)`
+/// within the 2048-byte header span writes bytes 816..820 of
+/// `cloud_half.vdb`, the x of the first top-level node's origin (-4096).
+/// `vdb-rs` overflowed adding a child's offset to it and panicked; with
+/// `RUST_BACKTRACE` set, the panic hook's backtrace cost the loading thread
+/// 165 MB. The prescan refuses the origin itself, within the bound.
+#[test]
+fn vdb_half_unaligned_origin_is_refused() {
+    let seed = read("volumes/cloud_half.vdb");
+    let bytes = mutate(
+        &seed,
+        &[Mutation::Field32(
+            3_062_324_873_471_125_363,
+            i32::MAX as u32,
+        )],
+        2048,
+    );
+    assert_eq!(&seed[816..820], &(-4096i32).to_le_bytes());
+    assert_eq!(&bytes[816..820], &i32::MAX.to_le_bytes());
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("h.vdb");
+    std::fs::write(&path, &bytes).unwrap();
+    let input = bytes.len() as u64;
+    let what = format!("vdb half, unaligned origin ({input} bytes)");
+    let load = path.clone();
+    let o = run_case(&what, move || {
+        load_grid(&load, GridFormat::Vdb, None)
+            .map(Some)
+            .map_err(|e| e.to_string())
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    check_alloc(&what, input, &o).unwrap_or_else(|e| panic!("{e}"));
+    let Err(e) = &o.result else {
+        panic!("{what}: a corrupt origin loaded");
+    };
+    assert!(e.contains(&path.display().to_string()), "{e}");
+    // Refused by the prescan, not by a contained panic in vdb-rs.
+    assert!(
+        e.contains("origin") && e.contains("4096") && !e.contains("reader failed"),
+        "{e}"
+    );
 }
 
 /// The mutations do what they say (so that the fuzzing above is not a

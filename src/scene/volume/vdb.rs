@@ -17,9 +17,11 @@
 //! walks the same structure `vdb-rs` will read (archive header, grid
 //! descriptors, the chosen grid's metadata, transform, tree topology and
 //! leaf buffers), checking every length and offset against the file's size
-//! and every Blosc block header against its payload, and reporting
-//! truncation with the part of the file that is cut. `vdb-rs` then runs
-//! inside `catch_unwind` in case anything was missed.
+//! and every Blosc block header against its payload, and every top-level
+//! node's origin against the alignment that `vdb-rs`'s `i32` coordinate
+//! arithmetic relies on, and reporting truncation with the part of the
+//! file that is cut. `vdb-rs` then runs inside `catch_unwind` in case
+//! anything was missed.
 
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -53,6 +55,13 @@ const COMPRESS_BLOSC: u32 = 0x4;
 const FLOAT_TREE: &str = "Tree_float_5_4_3";
 /// The same tree saved with half-float values.
 const HALF_TREE: &str = "Tree_float_5_4_3_HalfFloat";
+
+/// Voxels along each axis of a top-level (32³ × 16³ × 8³) node. OpenVDB
+/// writes a top-level node's origin as a multiple of this; `vdb-rs` adds
+/// its children's offsets (up to 31 × 128) to the origin in `i32`, which
+/// overflows (a panic) for an origin within 4096 of `i32::MAX` that is not
+/// one.
+const TOP_NODE_SPAN: i32 = 4096;
 
 /// Reads the float grid `grid_name` of the `.vdb` file at `path` into a
 /// dense grid over its active bounding box (inactive voxels are 0).
@@ -684,7 +693,14 @@ fn prescan<R: Read + Seek>(
     let mut leaves: u64 = 0;
     for root in 0..roots {
         s.part = format!("tree topology of grid {quoted} (top-level node {root})");
-        s.skip(12, "the node origin")?;
+        let o = s.bytes::<12>("the node origin")?;
+        let origin = [0, 4, 8].map(|i| i32::from_le_bytes([o[i], o[i + 1], o[i + 2], o[i + 3]]));
+        if origin.iter().any(|&c| c & (TOP_NODE_SPAN - 1) != 0) {
+            return Err(s.err(format!(
+                "the node origin {origin:?} is not a multiple of {TOP_NODE_SPAN} on every axis \
+                 (corrupt data)"
+            )));
+        }
         let children = internal_node(&mut s, &layout, 5)?;
         for _ in children {
             let grandchildren = internal_node(&mut s, &layout, 4)?;
@@ -878,6 +894,32 @@ mod tests {
         assert!(p.half);
         // Internal nodes without active tiles store nothing in half files.
         assert!(!p.insertions.is_empty());
+    }
+
+    #[test]
+    fn unaligned_top_level_origin_is_refused() {
+        // fuzz_vdb_half: the x of the first top-level node's origin (bytes
+        // 816..820, -4096) set to i32::MAX made vdb-rs overflow adding a
+        // child's offset to it.
+        let half = std::fs::read(fixture("cloud_half.vdb")).unwrap();
+        assert_eq!(half[816..820], (-4096i32).to_le_bytes());
+        let with_x = |x: i32| {
+            let mut b = half.clone();
+            b[816..820].copy_from_slice(&x.to_le_bytes());
+            scan(&b, "density")
+        };
+        for x in [i32::MAX, 1, -4095] {
+            let e = with_x(x).unwrap_err();
+            assert!(
+                e.contains("top-level node 0") && e.contains("origin") && e.contains("corrupt"),
+                "x = {x}: {e}"
+            );
+        }
+        // Aligned origins pass, the extremes included (their children's
+        // coordinates still fit in i32).
+        for x in [i32::MIN, i32::MAX - (TOP_NODE_SPAN - 1), 4096] {
+            assert!(with_x(x).is_ok(), "x = {x}");
+        }
     }
 
     #[test]
