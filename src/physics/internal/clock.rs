@@ -468,26 +468,6 @@ mod tests {
     use crate::physics::testing::*;
     use crate::physics::volume::Optics;
 
-    /// A homogeneous ball of radius 1 (ρ = 1 inside, 0 outside): edges the
-    /// midpoint rule cannot resolve.
-    struct Ball;
-
-    impl DensityField for Ball {
-        fn density(&self, p: Vec3) -> f32 {
-            if p.length_squared() < 1.0 {
-                1.0
-            } else {
-                0.0
-            }
-        }
-        fn bounds(&self) -> (Vec3, Vec3) {
-            (Vec3::splat(-1.0), Vec3::splat(1.0))
-        }
-        fn max_in_box(&self, _: Vec3, _: Vec3) -> f32 {
-            1.0
-        }
-    }
-
     /// Rays through a ball of σ_t 10 at one offset `r` from its centre:
     /// each ray's quadrature optical depth through the ball has an error
     /// (its edges fall inside lattice steps), but over rays that differ
@@ -497,8 +477,10 @@ mod tests {
     /// homogeneous sphere.
     #[test]
     fn lattice_phase_leaves_no_bias_at_an_edge() {
+        // ρ = 1 inside the unit ball, 0 outside: edges the midpoint rule
+        // cannot resolve.
         let vol = Volume::new(
-            Ball,
+            Ball { radius: 1.0 },
             Optics {
                 sigma_t: Vec3::splat(10.0),
                 albedo: Vec3::splat(1.0),
