@@ -1498,16 +1498,6 @@ fn passes_cut_short_by_the_driver_are_reported() {
     }
 }
 
-/// The CPU renderer for `prepared` with `settings` and, for the internal
-/// lights, the set `lights`.
-fn cpu_renderer(
-    prepared: &Arc<PreparedScene>,
-    settings: &RenderSettings,
-    lights: Option<Arc<InternalLights>>,
-) -> Renderer {
-    Renderer::with_lights(prepared.clone(), settings, lights)
-}
-
 /// The reference path tracer on both backends with the same random
 /// numbers: the thin sphere and the puffs' voxel grid, 24², 16 passes.
 /// At least 97 % of the pixel passes must come out the same (to 1e-3; all
@@ -1523,10 +1513,10 @@ fn reference_gives_the_cpus_estimate_for_the_same_random_numbers() {
         let mut settings = prepared.scene.render.clone();
         settings.method = Method::Reference;
         settings.seed = 5;
-        let cpu = cpu_renderer(&prepared, &settings, None);
+        let cpu = Renderer::with_lights(prepared.clone(), &settings, None);
         let mut gpu =
             GpuRenderer::reference(&ctx, &prepared, 5).unwrap_or_else(|e| panic!("{e:#}"));
-        common::compare_same_streams(scene, &mut gpu, &cpu, 5, 16, 0.97);
+        common::compare_same_streams(scene, &mut gpu, &cpu, 16);
     }
 }
 
@@ -1567,15 +1557,6 @@ fn gather_gives_the_cpus_estimate_for_the_same_random_numbers() {
         settings.internal.expert.resample_every = 0;
         settings.seed = 3;
         let lights = common::build_lights(&prepared, &settings);
-        let cpu = cpu_renderer(&prepared, &settings, Some(lights.clone()));
-        let mut gpu = GpuRenderer::internal(
-            &ctx,
-            &prepared,
-            &lights,
-            settings.internal.expert.light_samples,
-            3,
-        )
-        .unwrap_or_else(|e| panic!("{e:#}"));
-        common::compare_same_streams(label, &mut gpu, &cpu, 3, 16, 0.97);
+        common::compare_gathers_same_streams(label, &ctx, &prepared, &settings, &lights, 16);
     }
 }

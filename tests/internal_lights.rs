@@ -279,6 +279,30 @@ fn defaults_agree_with_reference_puffs() {
     check_defaults("assets/scenes/puffs_grid.ron", 16384, 64);
 }
 
+/// The thin sphere's scene made thick (optical radius 12, albedo 0.99,
+/// `g` 0.5) and lit by a sun from just behind the camera, at `side`² and
+/// (if given) a narrower field of view, every internal-lights setting at
+/// its default.
+fn thick_sphere_lit_from_the_camera(
+    side: u32,
+    fov_y_deg: Option<f32>,
+) -> std::sync::Arc<lantern::render::PreparedScene> {
+    std::sync::Arc::new(common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
+        s.camera.width = side;
+        s.camera.height = side;
+        if let Some(fov) = fov_y_deg {
+            s.camera.fov_y_deg = fov;
+        }
+        s.medium.sigma_t = Vec3::splat(12.0);
+        s.medium.albedo = Vec3::splat(0.99);
+        s.lights = vec![lantern::scene::Light::Sun {
+            direction: Vec3::new(0.05, -0.1, -1.0),
+            irradiance: Vec3::splat(3.0),
+        }];
+        s.render.internal = lantern::scene::InternalSettings::default();
+    }))
+}
+
 /// A thick homogeneous sphere (optical radius 12, albedo 0.99, `g` 0.5)
 /// lit from behind the camera, at the defaults: the same targets. With
 /// the optical-depth clock's quadrature at most two steps per majorant
@@ -286,18 +310,7 @@ fn defaults_agree_with_reference_puffs() {
 /// came out 12 % dark at these settings.
 #[test]
 fn defaults_agree_with_reference_thick_sphere_lit_from_the_camera() {
-    let prepared =
-        std::sync::Arc::new(common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
-            s.camera.width = 48;
-            s.camera.height = 48;
-            s.medium.sigma_t = Vec3::splat(12.0);
-            s.medium.albedo = Vec3::splat(0.99);
-            s.lights = vec![lantern::scene::Light::Sun {
-                direction: Vec3::new(0.05, -0.1, -1.0),
-                irradiance: Vec3::splat(3.0),
-            }];
-            s.render.internal = lantern::scene::InternalSettings::default();
-        }));
+    let prepared = thick_sphere_lit_from_the_camera(48, None);
     let reference = common::render(&prepared, Method::Reference, 7, 4096);
     let internal = common::render(&prepared, Method::Internal, 8, 64);
     let (err, block) = mean_and_block_rmse(&internal.mean(), &reference.mean(), 48, 48);
@@ -317,7 +330,7 @@ fn defaults_agree_with_reference_thick_sphere_lit_from_the_camera() {
 /// cells, the error at the sphere's surface was a smooth function of where
 /// the surface fell on the lattice, which changes slowest at the image's
 /// centre: rings of ±5 % around it, whatever the light samples, walks or
-/// renewal (`gated_walk::lattice_phase`).
+/// renewal (`physics::internal::clock::lattice_phase`).
 ///
 /// The statistic: the image's annuli one pixel wide, their grey means
 /// against a smooth fit in `r²` (the sphere's own fall-off), as a χ² whose
@@ -327,19 +340,7 @@ fn defaults_agree_with_reference_thick_sphere_lit_from_the_camera() {
 #[test]
 fn the_centre_of_a_sphere_lit_from_the_camera_has_no_rings() {
     let (w, h) = (32usize, 32usize);
-    let prepared =
-        std::sync::Arc::new(common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
-            s.camera.width = w as u32;
-            s.camera.height = h as u32;
-            s.camera.fov_y_deg = 8.0;
-            s.medium.sigma_t = Vec3::splat(12.0);
-            s.medium.albedo = Vec3::splat(0.99);
-            s.lights = vec![lantern::scene::Light::Sun {
-                direction: Vec3::new(0.05, -0.1, -1.0),
-                irradiance: Vec3::splat(3.0),
-            }];
-            s.render.internal = lantern::scene::InternalSettings::default();
-        }));
+    let prepared = thick_sphere_lit_from_the_camera(w as u32, Some(8.0));
     let internal = common::render(&prepared, Method::Internal, 8, 48);
     let image = internal.mean();
     common::dump("rings_centre_defaults", w as u32, h as u32, &image);

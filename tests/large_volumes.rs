@@ -172,14 +172,5 @@ fn grid_512_cubed_loads_and_renders_on_both_backends() {
     // the same estimates pass by pass, with the grid in a 3D texture on
     // the GPU and in memory on the CPU.
     settings.seed = 2;
-    let cpu = lantern::cpu::Renderer::with_lights(prepared.clone(), &settings, Some(cache.clone()));
-    let mut renderer = GpuRenderer::internal(
-        &ctx,
-        &prepared,
-        &cache,
-        settings.internal.expert.light_samples,
-        2,
-    )
-    .unwrap_or_else(|e| panic!("{e:#}"));
-    common::compare_same_streams("512³ internal", &mut renderer, &cpu, 2, 16, 0.97);
+    common::compare_gathers_same_streams("512³ internal", &ctx, &prepared, &settings, &cache, 16);
 }

@@ -31,7 +31,27 @@ fn lattice_phase(dir: vec3<f32>) -> f32 {
     var s = pcg_hash(bitcast<u32>(dir.z) >> PHASE_DROPPED_BITS);
     s = pcg_hash((bitcast<u32>(dir.y) >> PHASE_DROPPED_BITS) ^ s);
     s = pcg_hash((bitcast<u32>(dir.x) >> PHASE_DROPPED_BITS) ^ s);
-    return 1.0 - f32(s >> 8u) * (1.0 / 16777216.0);
+    return 1.0 - rng_unit(s);
+}
+
+// The `i`-th step `(p0, p1)` of the clock's lattice in the cell `[a, b]`
+// and where its rate is sampled (`lattice_step`): a whole step at its
+// middle, the first and the last step that the cell's faces cut where
+// each point of the cell weighs once over the phase.
+fn lattice_step(a: f32, b: f32, h: f32, phase: f32, i: u32) -> vec3<f32> {
+    let end = a + (f32(i) + phase) * h;
+    if i == 0u {
+        if end < b {
+            return vec3<f32>(a, end, a + 0.5 * phase * phase * h);
+        }
+        return vec3<f32>(a, b, 0.5 * (a + b));
+    }
+    let p0 = a + (f32(i) - 1.0 + phase) * h;
+    if end < b {
+        return vec3<f32>(p0, end, 0.5 * (p0 + end));
+    }
+    let l = max(b - p0, 0.0);
+    return vec3<f32>(p0, b, b - 0.5 * l * l / h);
 }
 
 // Most gates a walk on the GPU records, `N + 1` (a private array per
@@ -117,27 +137,13 @@ fn march_clock(
         let h = clock_step(cell_min, seg.majorant, s_star);
         var i = 0u;
         loop {
-            // The lattice's `i`-th step in the cell and where its rate is
-            // sampled (`lattice_step`): a whole step at its middle, the
-            // first and the last step that the cell's faces cut where
-            // each point of the cell weighs once over the phase.
-            var p0 = a;
-            if i > 0u {
-                p0 = a + (f32(i) - 1.0 + phase) * h;
-            }
+            let step = lattice_step(a, b, h, phase, i);
+            let p0 = step.x;
             if p0 >= b {
                 break;
             }
-            let lattice_end = a + (f32(i) + phase) * h;
-            let p1 = min(lattice_end, b);
-            var at = 0.5 * (p0 + p1);
-            if i == 0u && lattice_end < b {
-                at = a + 0.5 * phase * phase * h;
-            } else if i > 0u && lattice_end >= b {
-                let l = max(b - p0, 0.0);
-                at = b - 0.5 * l * l / h;
-            }
-            let c = sigma_g * density(origin + dir * at);
+            let p1 = step.y;
+            let c = sigma_g * density(origin + dir * step.z);
             let end = min(p1, t_stop);
             let d_tau = c * max(end - p0, 0.0);
             if c > 0.0 && acc + d_tau >= budget {

@@ -7,11 +7,26 @@ struct Rng {
     state: u32,
 }
 
-// A 32-bit integer hash (`pcg_hash` in rng.rs).
-fn pcg_hash(v: u32) -> u32 {
-    let state = v * 747796405u + 2891336453u;
+// The LCG's multiplier, its inverse modulo 2³² and its increment
+// (`MULTIPLIER`, `INVERSE_MULTIPLIER`, `INCREMENT` in rng.rs).
+const RNG_MULTIPLIER: u32 = 747796405u;
+const RNG_INVERSE_MULTIPLIER: u32 = 3425435293u;
+const RNG_INCREMENT: u32 = 2891336453u;
+
+// PCG's output permutation of one LCG state (`permute`).
+fn rng_permute(state: u32) -> u32 {
     let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
     return (word >> 22u) ^ word;
+}
+
+// The uniform number in [0, 1) that 32 random bits make (`unit`).
+fn rng_unit(bits: u32) -> f32 {
+    return f32(bits >> 8u) * (1.0 / 16777216.0);
+}
+
+// A 32-bit integer hash (`pcg_hash` in rng.rs).
+fn pcg_hash(v: u32) -> u32 {
+    return rng_permute(v * RNG_MULTIPLIER + RNG_INCREMENT);
 }
 
 // The stream of sample `index` in `pass` of a render whose 64-bit seed is
@@ -26,27 +41,23 @@ fn rng_for_sample(seed_lo: u32, seed_hi: u32, index: u32, pass_index: u32) -> Rn
 // The next 32 random bits (`Rng::next_u32`).
 fn rng_next_u32(rng: ptr<function, Rng>) -> u32 {
     let old = (*rng).state;
-    (*rng).state = old * 747796405u + 2891336453u;
-    let word = ((old >> ((old >> 28u) + 4u)) ^ old) * 277803737u;
-    return (word >> 22u) ^ word;
+    (*rng).state = old * RNG_MULTIPLIER + RNG_INCREMENT;
+    return rng_permute(old);
 }
 
 // The number before the stream's current position, stepping the stream
-// back over it (`Rng::previous_u32`): the LCG run backwards, its
-// multiplier's inverse modulo 2³² being 3425435293.
+// back over it (`Rng::previous_u32`): the LCG run backwards.
 fn rng_previous_u32(rng: ptr<function, Rng>) -> u32 {
-    let old = ((*rng).state - 2891336453u) * 3425435293u;
-    (*rng).state = old;
-    let word = ((old >> ((old >> 28u) + 4u)) ^ old) * 277803737u;
-    return (word >> 22u) ^ word;
+    (*rng).state = ((*rng).state - RNG_INCREMENT) * RNG_INVERSE_MULTIPLIER;
+    return rng_permute((*rng).state);
 }
 
 // `rng_previous_u32` as a uniform number in [0, 1) (`Rng::previous_f32`).
 fn rng_previous_f32(rng: ptr<function, Rng>) -> f32 {
-    return f32(rng_previous_u32(rng) >> 8u) * (1.0 / 16777216.0);
+    return rng_unit(rng_previous_u32(rng));
 }
 
 // A uniform number in [0, 1) (`Rng::next_f32`).
 fn rng_next_f32(rng: ptr<function, Rng>) -> f32 {
-    return f32(rng_next_u32(rng) >> 8u) * (1.0 / 16777216.0);
+    return rng_unit(rng_next_u32(rng));
 }

@@ -5,6 +5,19 @@
 //! pass gets its own stream, seeded by hashing (seed, pixel, pass), so a
 //! render reproduces whatever the thread count or the order of work.
 
+/// The LCG's multiplier, its inverse modulo 2³² (to step a stream back)
+/// and its increment; mirrored in `shaders/common/rng.wgsl`.
+const MULTIPLIER: u32 = 747_796_405;
+const INVERSE_MULTIPLIER: u32 = 3_425_435_293;
+const INCREMENT: u32 = 2_891_336_453;
+
+/// PCG's output permutation (RXS-M-XS) of one LCG state.
+#[inline]
+fn permute(state: u32) -> u32 {
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
+}
+
 /// One stream of uniform random numbers.
 #[derive(Clone, Debug)]
 pub struct Rng {
@@ -15,9 +28,7 @@ pub struct Rng {
 /// Jarzynski & Olano 2020, "Hash Functions for GPU Rendering").
 #[inline]
 pub fn pcg_hash(v: u32) -> u32 {
-    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
-    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
-    (word >> 22) ^ word
+    permute(v.wrapping_mul(MULTIPLIER).wrapping_add(INCREMENT))
 }
 
 impl Rng {
@@ -39,39 +50,41 @@ impl Rng {
     #[inline]
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
-        self.state = old.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
-        let word = ((old >> ((old >> 28) + 4)) ^ old).wrapping_mul(277_803_737);
-        (word >> 22) ^ word
+        self.state = old.wrapping_mul(MULTIPLIER).wrapping_add(INCREMENT);
+        permute(old)
     }
 
     /// A uniform number in [0, 1).
     #[inline]
     pub fn next_f32(&mut self) -> f32 {
-        (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+        unit(self.next_u32())
     }
 
     /// The number [`Rng::next_u32`] returned last, stepping the stream back
-    /// over it: the LCG run backwards (`3_425_435_293` is its multiplier's
-    /// inverse modulo 2³²). A pass that draws a block of numbers up front
+    /// over it: the LCG run backwards. A pass that draws a block of numbers up front
     /// and uses them in reverse order reads them back this way without
     /// storing them (the GPU gather's jitters).
     #[inline]
     pub fn previous_u32(&mut self) -> u32 {
-        let old = self
+        self.state = self
             .state
-            .wrapping_sub(2_891_336_453)
-            .wrapping_mul(3_425_435_293);
-        self.state = old;
-        let word = ((old >> ((old >> 28) + 4)) ^ old).wrapping_mul(277_803_737);
-        (word >> 22) ^ word
+            .wrapping_sub(INCREMENT)
+            .wrapping_mul(INVERSE_MULTIPLIER);
+        permute(self.state)
     }
 
     /// [`Rng::previous_u32`] as a uniform number in [0, 1), the same
     /// number [`Rng::next_f32`] made of it.
     #[inline]
     pub fn previous_f32(&mut self) -> f32 {
-        (self.previous_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+        unit(self.previous_u32())
     }
+}
+
+/// The uniform number in [0, 1) that 32 random bits make (their top 24).
+#[inline]
+pub(crate) fn unit(bits: u32) -> f32 {
+    (bits >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
 #[cfg(test)]

@@ -39,7 +39,7 @@
 
 use glam::Vec3;
 
-use crate::physics::rng::pcg_hash;
+use crate::physics::rng::{pcg_hash, unit};
 use crate::physics::volume::{DensityField, Volume};
 
 /// What the walk's clock counts between gates: the settings' enum, one
@@ -154,7 +154,7 @@ pub fn lattice_phase(dir: Vec3) -> f32 {
     let s = pcg_hash(dir.z.to_bits() >> PHASE_DROPPED_BITS);
     let s = pcg_hash((dir.y.to_bits() >> PHASE_DROPPED_BITS) ^ s);
     let s = pcg_hash((dir.x.to_bits() >> PHASE_DROPPED_BITS) ^ s);
-    1.0 - (s >> 8) as f32 * (1.0 / 16_777_216.0)
+    1.0 - unit(s)
 }
 
 /// The `i`-th step of the optical-depth clock's lattice in the cell

@@ -317,6 +317,10 @@ impl<R: Read + Seek> Scan<'_, R> {
         self.bytes::<8>(what).map(u64::from_le_bytes)
     }
 
+    fn i32(&mut self, what: &str) -> Result<i32, SceneError> {
+        self.bytes::<4>(what).map(i32::from_le_bytes)
+    }
+
     fn i64(&mut self, what: &str) -> Result<i64, SceneError> {
         self.bytes::<8>(what).map(i64::from_le_bytes)
     }
@@ -693,8 +697,8 @@ fn prescan<R: Read + Seek>(
     let mut leaves: u64 = 0;
     for root in 0..roots {
         s.part = format!("tree topology of grid {quoted} (top-level node {root})");
-        let o = s.bytes::<12>("the node origin")?;
-        let origin = [0, 4, 8].map(|i| i32::from_le_bytes([o[i], o[i + 1], o[i + 2], o[i + 3]]));
+        let what = "the node origin";
+        let origin = [s.i32(what)?, s.i32(what)?, s.i32(what)?];
         if origin.iter().any(|&c| c & (TOP_NODE_SPAN - 1) != 0) {
             return Err(s.err(format!(
                 "the node origin {origin:?} is not a multiple of {TOP_NODE_SPAN} on every axis \
