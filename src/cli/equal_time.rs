@@ -6,9 +6,12 @@
 //! For each scene both renderers (CPU) render progressively with seeds
 //! other than the converged image's; the clock starts before the renderer
 //! is built (the internal lights' placement and walks are paid for) and is
-//! paused while the image is measured. At each time `T` of `--times`, at
-//! the end of the first pass at or past `T` (so at most one pass more), the
-//! image is compared with the converged one:
+//! paused while the image is measured. At each time `T` of `--times` the
+//! internal-lights image is taken at the end of its first pass at or past
+//! `T` (so at most one pass more), and the reference's at the end of its
+//! first pass at or past the time that took (its passes last milliseconds):
+//! both have run the same wall time, however long an internal-lights pass
+//! is. Each image is compared with the converged one:
 //!
 //! - the error of the image mean per channel, `mean(a)/mean(c) − 1`, signed
 //!   (the converged mean's own standard error, printed above each table,
@@ -322,31 +325,33 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
 
     let c = &converged.image.pixels;
     let v = &converged.var;
+    // The internal lights first: their passes are long, and the reference
+    // is then measured at the wall time each of their snapshots took.
+    let internal_snapshots = snapshots(
+        &prepared,
+        &internal,
+        times,
+        c,
+        v,
+        &format!("{stem} internal"),
+        !args.fixed_renewal,
+    )?;
+    let spent: Vec<f64> = internal_snapshots.iter().map(|s| s.secs).collect();
+    let mut reference_snapshots = snapshots(
+        &prepared,
+        &reference,
+        &spent,
+        c,
+        v,
+        &format!("{stem} reference"),
+        !args.fixed_renewal,
+    )?;
+    for (r, &t) in reference_snapshots.iter_mut().zip(times) {
+        r.target = t;
+    }
     let runs = [
-        (
-            "reference",
-            snapshots(
-                &prepared,
-                &reference,
-                times,
-                c,
-                v,
-                &format!("{stem} reference"),
-                !args.fixed_renewal,
-            )?,
-        ),
-        (
-            "internal",
-            snapshots(
-                &prepared,
-                &internal,
-                times,
-                c,
-                v,
-                &format!("{stem} internal"),
-                !args.fixed_renewal,
-            )?,
-        ),
+        ("reference", reference_snapshots),
+        ("internal", internal_snapshots),
     ];
 
     let (pixel_noise, block_noise, mean_se) = own_noise(&converged);
@@ -521,6 +526,12 @@ mod tests {
         }
         let r = of("reference");
         assert!(r[1].2 < r[0].2, "{csv}");
+        // Both are measured at the same wall time: the reference at the
+        // end of its first pass at or past the internal lights' snapshot
+        // (one pass of the reference at 16² is well under 50 ms).
+        for (r, i) in of("reference").iter().zip(&of("internal")) {
+            assert!(r.0 >= i.0 && r.0 - i.0 < 0.05, "{csv}");
+        }
         let md = std::fs::read_to_string(dir.path().join("out/report.md")).unwrap();
         assert!(
             md.contains("| internal | 0.4 |") && md.contains("8×8 block RMSE"),

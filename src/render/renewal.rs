@@ -13,7 +13,10 @@
 //! spread of the passes within each set and `b` from the spread of the
 //! sets' means, pooled over the image's pixels, and sets `P` to `P*` after
 //! each set once three are done (the first sets last the settings'
-//! `resample_every` passes).
+//! `resample_every` passes), but never so long that the sets' builds take
+//! less than a tenth of the time ([`MIN_SET_SHARE`]: a small `b` is hard
+//! to measure, and a period far too long costs more than one a little
+//! short).
 //!
 //! The measured times make the schedule depend on the machine, so it is
 //! for renders that stop at a time limit (which do anyway); a render of a
@@ -23,6 +26,19 @@ use glam::Vec3;
 
 /// The longest set a balanced schedule chooses, in passes.
 pub const MAX_PERIOD: u32 = 64;
+
+/// The least share of a pass's time that a balanced schedule spends on
+/// sets: the period is at most `d / (MIN_SET_SHARE · c)` passes.
+///
+/// `b` is estimated from the spread of the sets' means, `b + a/n_s`, and
+/// where `b` is a percent or two of `a` (thin smoke) the first sets' few
+/// means cannot tell it from zero: the estimate read ≤ 0 on the suite's
+/// wispy smoke and the sets grew to 64 passes, where `lantern noise`
+/// measured `P* ≈ 7–18`, leaving 1.2–1.75× the variance of the best
+/// period. At the best period the sets' share of the time is
+/// `d/(P* c) = √(bd/(ac))` (0.14 on the wispy smoke, 0.4 on the plume), so
+/// a floor of 0.1 costs at most 10 % where the sets add no noise at all.
+pub const MIN_SET_SHARE: f64 = 0.1;
 
 /// Sets that must be complete before the period is balanced.
 const SETS_BEFORE_BALANCING: u32 = 3;
@@ -43,8 +59,8 @@ pub struct RenewalEstimates {
 }
 
 impl RenewalEstimates {
-    /// `P* = √(ad/(bc))` rounded and clamped to `1..=MAX_PERIOD`
-    /// (`MAX_PERIOD` where the sets add no measurable variance).
+    /// `P* = √(ad/(bc))` rounded and clamped to `1..=`[`longest_period`](Self::longest_period)
+    /// (the longest where the sets add no measurable variance).
     pub fn best_period(&self) -> u32 {
         let (a, b, c, d) = (
             self.pass_variance,
@@ -52,12 +68,29 @@ impl RenewalEstimates {
             self.pass_secs,
             self.set_secs,
         );
+        let longest = self.longest_period();
         if b.is_nan() || b <= 0.0 || c.is_nan() || c <= 0.0 {
-            return MAX_PERIOD;
+            return longest;
         }
         let p = (a.max(0.0) * d.max(0.0) / (b * c)).sqrt();
         if p.is_finite() {
-            (p.round() as u32).clamp(1, MAX_PERIOD)
+            (p.round() as u32).clamp(1, longest)
+        } else {
+            longest
+        }
+    }
+
+    /// The longest period these costs allow: sets take at least
+    /// [`MIN_SET_SHARE`] of the passes' time (`d / (MIN_SET_SHARE · c)`
+    /// rounded), between 1 and [`MAX_PERIOD`].
+    pub fn longest_period(&self) -> u32 {
+        let (c, d) = (self.pass_secs, self.set_secs);
+        if c.is_nan() || c <= 0.0 || d.is_nan() {
+            return MAX_PERIOD;
+        }
+        let p = (d.max(0.0) / (MIN_SET_SHARE * c)).round();
+        if p.is_finite() {
+            (p as u32).clamp(1, MAX_PERIOD)
         } else {
             MAX_PERIOD
         }
@@ -266,8 +299,8 @@ mod tests {
         );
     }
 
-    /// Without set noise the sets grow to the longest period; with set
-    /// noise that dominates, one pass per set.
+    /// Without set noise the sets grow to the longest period the costs
+    /// allow; with set noise that dominates, one pass per set.
     #[test]
     fn the_period_follows_the_balance() {
         let none = RenewalEstimates {
@@ -276,7 +309,19 @@ mod tests {
             pass_secs: 0.1,
             set_secs: 0.4,
         };
-        assert_eq!(none.best_period(), MAX_PERIOD);
+        // 0.4 / (0.1 · 0.1) = 40 passes: sets take a tenth of the time.
+        assert_eq!(none.best_period(), 40);
+        let long_builds = RenewalEstimates {
+            set_secs: 4.0,
+            ..none
+        };
+        assert_eq!(long_builds.best_period(), MAX_PERIOD);
+        let light = RenewalEstimates {
+            set_variance: 1e-4,
+            ..none
+        };
+        // P* = √(0.4 / (1e-4 · 0.1)) = 200, held at 40.
+        assert_eq!(light.best_period(), 40);
         let heavy = RenewalEstimates {
             set_variance: 10.0,
             ..none
