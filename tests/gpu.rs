@@ -1488,8 +1488,12 @@ fn passes_cut_short_by_the_driver_are_reported() {
         common::gpu_gather(&ctx, &prepared, &cache, light_samples, 2).cut_short_passes()
     };
     let heavy = cut_at(32, 3);
-    let defaults = cut_at(4, 2);
-    println!("passes cut short: {heavy} (32 points × 3 scatterings), {defaults} (defaults)");
+    let final_preset = lantern::scene::Quality::Final.settings().expert;
+    let defaults = cut_at(final_preset.light_samples, final_preset.window_scatters);
+    println!(
+        "passes cut short: {heavy} (32 points × 3 scatterings), {defaults} (defaults: {} points × {} scatterings)",
+        final_preset.light_samples, final_preset.window_scatters
+    );
     assert_eq!(defaults, 0, "the defaults' gather was cut short");
     if llvmpipe {
         assert!(heavy > 0, "llvmpipe's loop cap went unreported");
