@@ -451,7 +451,8 @@ struct WindowPoint {
 /// source at `x''` has travelled `x'' → x' → y` with the clock from `x` to
 /// `x''` at most `s*` (the next terms of the expansion of `G(s)` inside
 /// the window by number of scatterings, [method §6](crate::doc::method)'s `G ≈ G_SS` being
-/// its first two).
+/// its first two), each further step taken by Russian roulette with the
+/// share of a window left in the budget ([method §6.4](crate::doc::method)).
 fn field_l1_at<D: DensityField>(
     vol: &Volume<D>,
     lights: &Lights,
@@ -529,6 +530,22 @@ fn field_l1_at<D: DensityField>(
             break;
         }
         budget -= used;
+        if budget <= 0.0 {
+            break;
+        }
+        // Russian roulette on the next scattering, kept with the share of
+        // a window still left in the budget: its source is drawn within
+        // that budget and weighs it (`1/pdf(r)` is the budget over the
+        // rate), so its expected share shrinks with it, and the weight
+        // `1/keep` undoes that. The later scatterings of thin media are
+        // a few percent of `L₁` for as much work as the first.
+        let keep = (budget / cache.s_star).min(1.0);
+        if keep < 1.0 {
+            if rng.next_f32() >= keep {
+                break;
+            }
+            throughput /= keep;
+        }
         (point, rho_point, towards) = (xp, rho, travel);
     }
     sum
