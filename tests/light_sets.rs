@@ -26,8 +26,18 @@ fn noisy_lights() -> Arc<PreparedScene> {
 }
 
 fn render(prepared: &Arc<PreparedScene>, seed: u64, every: u32, spp: u32) -> Film {
+    render_with(prepared, Method::Internal, seed, every, spp)
+}
+
+fn render_with(
+    prepared: &Arc<PreparedScene>,
+    method: Method,
+    seed: u64,
+    every: u32,
+    spp: u32,
+) -> Film {
     let mut settings = prepared.scene.render.clone();
-    settings.method = Method::Internal;
+    settings.method = method;
     settings.seed = seed;
     settings.spp = spp;
     settings.internal.expert.resample_every = every;
@@ -55,11 +65,21 @@ fn mean_z2(a: &Film, b: &Film) -> f64 {
 }
 
 /// Two renders with different seeds: with a fresh light set every pass they
-/// differ by pixel noise only, so the mean z² is about 1 (the per-pixel
-/// variances are estimated from 512 passes each, which puts E[z²] within
-/// 1 % of 1, and the mean runs over ~500 channels: its spread is under
-/// 0.1; measured 1.02); with one set each they also differ by the two
-/// sets' walk noise, which more passes do not reduce (measured 26.8).
+/// differ by pixel noise only; with one set each they also differ by the
+/// two sets' walk noise, which more passes do not reduce (measured 25.6).
+/// The mean z² of pixel noise alone is about 1 for independent passes
+/// (the per-pixel variances are estimated from 512 passes each, which
+/// puts E[z²] within 1 % of 1, and the mean runs over ~500 channels: its
+/// spread is under 0.1; measured 1.02, and 0.93 with 8 points per ray and
+/// the window scatterings' roulette, when each pass's point in the pixel
+/// was drawn independently). The passes' points in the pixel are now
+/// spread evenly over the passes (`pixel_jitter`), so what a pixel's
+/// footprint holds averages faster than the passes' spread says, and z²
+/// reads below 1 by about the footprint's share of a pass's variance:
+/// 0.73 with renewed sets here (at most 0.28 of a pass's variance was the
+/// footprint's over the suite), 0.99 for the reference path tracer, whose
+/// samples' own noise dwarfs its footprint. Hence 0.6 below for renewed
+/// sets, and the reference's 0.8 as before.
 /// The same seed gives the same image, renewed sets included.
 #[test]
 fn renewed_light_sets_average_the_walk_noise_out() {
@@ -67,9 +87,19 @@ fn renewed_light_sets_average_the_walk_noise_out() {
     let spp = 512;
     let renewed = mean_z2(&render(&prepared, 1, 1, spp), &render(&prepared, 2, 1, spp));
     let fixed = mean_z2(&render(&prepared, 1, 0, spp), &render(&prepared, 2, 0, spp));
-    eprintln!("mean z² between two seeds: renewed sets {renewed:.3}, one set each {fixed:.3}");
+    let reference = mean_z2(
+        &render_with(&prepared, Method::Reference, 1, 0, spp),
+        &render_with(&prepared, Method::Reference, 2, 0, spp),
+    );
+    eprintln!(
+        "mean z² between two seeds: renewed sets {renewed:.3}, one set each {fixed:.3}, reference {reference:.3}"
+    );
     assert!(
-        (0.8..1.25).contains(&renewed),
+        (0.8..1.25).contains(&reference),
+        "reference: mean z² {reference}"
+    );
+    assert!(
+        (0.6..1.25).contains(&renewed),
         "renewed light sets: mean z² {renewed}"
     );
     assert!(fixed > 4.0, "one light set each: mean z² {fixed}");

@@ -14,9 +14,10 @@ fn camera_ray_dir(px: f32, py: f32) -> vec3<f32> {
 // `WORKGROUP_SIDE`, from Rust (the generated prelude, src/gpu/shaders.rs:
 // crate::gpu::renderer::WORKGROUP_SIDE).
 
-// The start of one pixel's sample in a pass (mirrors `Renderer::pass` in
+// The start of one pixel's sample in a pass (mirrors `pixel_ray` in
 // src/cpu/mod.rs): its index (rows top to bottom), its random stream for
-// (seed, pixel, pass), and the camera ray through a jittered point of it.
+// (seed, pixel, pass), and the camera ray through the pass's point of it
+// (`pixel_jitter`).
 struct PixelSample {
     index: u32,
     dir: vec3<f32>,
@@ -25,10 +26,9 @@ struct PixelSample {
 
 fn pixel_sample(id: vec3<u32>) -> PixelSample {
     let index = id.y * scene.camera.width + id.x;
-    var rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, index, pass_params.pass_index);
-    let jx = rng_next_f32(&rng);
-    let jy = rng_next_f32(&rng);
-    let dir = camera_ray_dir(f32(id.x) + jx, f32(id.y) + jy);
+    let j = pixel_jitter(pass_params.seed_lo, pass_params.seed_hi, index, pass_params.pass_index);
+    let rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, index, pass_params.pass_index);
+    let dir = camera_ray_dir(f32(id.x) + j.x, f32(id.y) + j.y);
     return PixelSample(index, dir, rng);
 }
 

@@ -61,3 +61,20 @@ fn rng_previous_f32(rng: ptr<function, Rng>) -> f32 {
 fn rng_next_f32(rng: ptr<function, Rng>) -> f32 {
     return rng_unit(rng_next_u32(rng));
 }
+
+// The steps of the R₂ sequence in 32-bit fixed point (`R2_STEPS`).
+const R2_STEP_X: u32 = 3242174889u;
+const R2_STEP_Y: u32 = 2447445414u;
+
+// Where in pixel `index` the camera ray of pass `pass_index` goes: point
+// `pass_index` of the R₂ sequence shifted by an offset drawn per seed and
+// pixel from the stream of pass 0xffffffff (`pixel_jitter` in rng.rs).
+fn pixel_jitter(seed_lo: u32, seed_hi: u32, index: u32, pass_index: u32) -> vec2<f32> {
+    var offset = rng_for_sample(seed_lo, seed_hi, index, 0xffffffffu);
+    let ox = rng_next_u32(&offset);
+    let oy = rng_next_u32(&offset);
+    return vec2<f32>(
+        rng_unit(ox + pass_index * R2_STEP_X),
+        rng_unit(oy + pass_index * R2_STEP_Y),
+    );
+}

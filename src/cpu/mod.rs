@@ -20,7 +20,7 @@ use rayon::prelude::*;
 use crate::physics::internal::gather::gather;
 use crate::physics::internal::sources::InternalLights;
 use crate::physics::reference::radiance_split;
-use crate::physics::rng::Rng;
+use crate::physics::rng::{pixel_jitter, Rng};
 use crate::render::renewal::BalancedRenewal;
 use crate::render::{internal_params, internal_params_for_set, light_set, Film, PreparedScene};
 use crate::scene::{CameraFrame, Method, RenderSettings};
@@ -284,14 +284,18 @@ impl Passes {
     }
 }
 
-/// The camera ray of pixel `(x, y)` in pass `pass`: its direction through a
-/// jittered point of the pixel, and the pixel's random stream (depending
-/// only on seed, pixel and pass) after the jitter, for the estimate.
+/// The camera ray of pixel `(x, y)` in pass `pass`: its direction through
+/// the pass's point of the pixel ([`pixel_jitter`]: uniform in each pass,
+/// evenly spread over the passes), and the pixel's random stream for the
+/// estimate (depending only on seed, pixel and pass).
 #[inline]
 pub fn pixel_ray(cam: &CameraFrame, seed: u64, x: u32, y: u32, pass: u32) -> (Vec3, Rng) {
-    let mut rng = Rng::for_sample(seed, y * cam.width + x, pass);
-    let (jx, jy) = (rng.next_f32(), rng.next_f32());
-    (cam.ray_dir(x as f32 + jx, y as f32 + jy), rng)
+    let index = y * cam.width + x;
+    let (jx, jy) = pixel_jitter(seed, index, pass);
+    (
+        cam.ray_dir(x as f32 + jx, y as f32 + jy),
+        Rng::for_sample(seed, index, pass),
+    )
 }
 
 /// Renders `spp` passes into a new film, calling `on_pass` after each; it

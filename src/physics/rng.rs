@@ -87,9 +87,73 @@ pub(crate) fn unit(bits: u32) -> f32 {
     (bits >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
+/// The steps of the R₂ sequence, `1/φ₂` and `1/φ₂²` (`φ₂` the plastic
+/// number, `φ₂³ = φ₂ + 1`; Roberts 2018), in 32-bit fixed point, so that
+/// its points wrap exactly on both backends; mirrored in
+/// `shaders/common/rng.wgsl`.
+const R2_STEPS: [u32; 2] = [3_242_174_889, 2_447_445_414];
+
+/// The "pass" of the stream that holds each pixel's offset of
+/// [`pixel_jitter`]: one no render reaches.
+const OFFSET_STREAM: u32 = u32::MAX;
+
+/// Where in pixel `index` (`[0, 1)²`) the camera ray of `pass` goes in a
+/// render with `seed`: point `pass` of the R₂ low-discrepancy sequence,
+/// shifted (modulo 1) by an offset drawn per seed and pixel.
+///
+/// Each pass's point is uniform over the pixel (the offset is), so every
+/// pass stays an unbiased estimate; over the passes the points spread
+/// evenly instead of clumping, so that what the pixel's footprint holds
+/// (an edge of a puff, wisps finer than a pixel) averages out faster than
+/// with independent points. This matters most to a renderer of few,
+/// costly passes: `lantern noise` put the footprint's share of one
+/// internal-lights pass's variance at 11 % on the wispy smoke, 21 % on
+/// the plume and 28 % on the thick sphere.
+#[inline]
+pub fn pixel_jitter(seed: u64, index: u32, pass: u32) -> (f32, f32) {
+    let mut offset = Rng::for_sample(seed, index, OFFSET_STREAM);
+    let (ox, oy) = (offset.next_u32(), offset.next_u32());
+    (
+        unit(ox.wrapping_add(pass.wrapping_mul(R2_STEPS[0]))),
+        unit(oy.wrapping_add(pass.wrapping_mul(R2_STEPS[1]))),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each pass's point is uniform over the pixel (over pixels: 64 cells
+    /// of the unit square, χ² at 63 dof), and one pixel's first 64 passes
+    /// fill its 8×8 cells far more evenly than independent points (empty
+    /// cells over 2000 random offsets: 7–13, median 10; 64 independent
+    /// points leave 13–31, median 23).
+    #[test]
+    fn pixel_jitter_is_uniform_per_pass_and_spread_over_passes() {
+        let cell = |(x, y): (f32, f32)| {
+            assert!((0.0..1.0).contains(&x) && (0.0..1.0).contains(&y));
+            (x * 8.0) as usize * 8 + (y * 8.0) as usize
+        };
+        for pass in [0u32, 1, 17, 1000] {
+            let mut counts = [0u32; 64];
+            let n = 64_000u32;
+            for index in 0..n {
+                counts[cell(pixel_jitter(3, index, pass))] += 1;
+            }
+            let e = f64::from(n) / 64.0;
+            let chi2: f64 = counts.iter().map(|&c| (f64::from(c) - e).powi(2) / e).sum();
+            // 63 dof: mean 63, sd 11.2; 120 is beyond 5 sd.
+            assert!(chi2 < 120.0, "pass {pass}: chi2 {chi2}");
+        }
+        for index in [0u32, 5, 999] {
+            let mut seen = [false; 64];
+            for pass in 0..64 {
+                seen[cell(pixel_jitter(3, index, pass))] = true;
+            }
+            let empty = seen.iter().filter(|&&s| !s).count();
+            assert!(empty <= 13, "pixel {index}: {empty} empty cells");
+        }
+    }
 
     #[test]
     fn stepping_back_returns_the_same_numbers_in_reverse() {
