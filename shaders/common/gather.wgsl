@@ -428,6 +428,18 @@ fn field_l1_at(
         if budget <= 0.0 {
             break;
         }
+        if scattering > 1u {
+            // Russian roulette on this further scattering, kept with the
+            // share of a window left in the budget (`field_l1_at` in
+            // gather.rs).
+            let keep = min(budget / gather_params.s_star, 1.0);
+            if keep < 1.0 {
+                if rng_next_f32(rng) >= keep {
+                    break;
+                }
+                throughput /= keep;
+            }
+        }
         let u1 = rng_next_f32(rng);
         let u2 = rng_next_f32(rng);
         let travel = sample_hg(gather_params.g, towards, u1, u2);
@@ -479,18 +491,6 @@ fn field_l1_at(
             break;
         }
         budget -= used;
-        if budget <= 0.0 {
-            break;
-        }
-        // Russian roulette on the next scattering, kept with the share of
-        // a window left in the budget (`field_l1_at` in gather.rs).
-        let keep = min(budget / gather_params.s_star, 1.0);
-        if keep < 1.0 {
-            if rng_next_f32(rng) >= keep {
-                break;
-            }
-            throughput /= keep;
-        }
         point = xp;
         rho_point = rho;
         towards = travel;

@@ -8,10 +8,8 @@ struct Rng {
 }
 
 // The LCG's multiplier, its inverse modulo 2³² and its increment
-// (`MULTIPLIER`, `INVERSE_MULTIPLIER`, `INCREMENT` in rng.rs).
-const RNG_MULTIPLIER: u32 = 747796405u;
-const RNG_INVERSE_MULTIPLIER: u32 = 3425435293u;
-const RNG_INCREMENT: u32 = 2891336453u;
+// (`RNG_MULTIPLIER`, `RNG_INVERSE_MULTIPLIER`, `RNG_INCREMENT`: generated
+// from `MULTIPLIER`, `INVERSE_MULTIPLIER`, `INCREMENT` in rng.rs).
 
 // PCG's output permutation of one LCG state (`permute`).
 fn rng_permute(state: u32) -> u32 {
@@ -62,15 +60,12 @@ fn rng_next_f32(rng: ptr<function, Rng>) -> f32 {
     return rng_unit(rng_next_u32(rng));
 }
 
-// The steps of the R₂ sequence in 32-bit fixed point (`R2_STEPS`).
-const R2_STEP_X: u32 = 3242174889u;
-const R2_STEP_Y: u32 = 2447445414u;
-
 // Where in pixel `index` the camera ray of pass `pass_index` goes: point
-// `pass_index` of the R₂ sequence shifted by an offset drawn per seed and
-// pixel from the stream of pass 0xffffffff (`pixel_jitter` in rng.rs).
+// `pass_index` of the R₂ sequence (its steps `R2_STEP_X`, `R2_STEP_Y`,
+// generated) shifted by an offset drawn per seed and pixel from the
+// stream `PIXEL_OFFSET_STREAM` (`pixel_jitter` in rng.rs).
 fn pixel_jitter(seed_lo: u32, seed_hi: u32, index: u32, pass_index: u32) -> vec2<f32> {
-    var offset = rng_for_sample(seed_lo, seed_hi, index, 0xffffffffu);
+    var offset = rng_for_sample(seed_lo, seed_hi, index, PIXEL_OFFSET_STREAM);
     let ox = rng_next_u32(&offset);
     let oy = rng_next_u32(&offset);
     return vec2<f32>(

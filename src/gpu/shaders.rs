@@ -163,6 +163,21 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!("PLACEMENT_LANES", U32, crate::gpu::mirrors::PLACEMENT_LANES),
     // The walks' private array of gates, `N + 1` for the largest `N`.
     shared!("GPU_MAX_GATES", U32, crate::gpu::mirrors::GPU_MAX_TERMS + 1),
+    // The random streams (`physics/rng.rs`, `shaders/common/rng.wgsl`).
+    shared!("RNG_MULTIPLIER", U32, crate::physics::rng::MULTIPLIER),
+    shared!(
+        "RNG_INVERSE_MULTIPLIER",
+        U32,
+        crate::physics::rng::INVERSE_MULTIPLIER
+    ),
+    shared!("RNG_INCREMENT", U32, crate::physics::rng::INCREMENT),
+    shared!("R2_STEP_X", U32, crate::physics::rng::R2_STEPS[0]),
+    shared!("R2_STEP_Y", U32, crate::physics::rng::R2_STEPS[1]),
+    shared!(
+        "PIXEL_OFFSET_STREAM",
+        U32,
+        crate::physics::rng::PIXEL_OFFSET_STREAM
+    ),
     // Random stream tags.
     shared!(
         "PLACEMENT_STREAM",

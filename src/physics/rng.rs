@@ -6,10 +6,13 @@
 //! render reproduces whatever the thread count or the order of work.
 
 /// The LCG's multiplier, its inverse modulo 2³² (to step a stream back)
-/// and its increment; mirrored in `shaders/common/rng.wgsl`.
-const MULTIPLIER: u32 = 747_796_405;
-const INVERSE_MULTIPLIER: u32 = 3_425_435_293;
-const INCREMENT: u32 = 2_891_336_453;
+/// and its increment; generated into the WGSL (`RNG_MULTIPLIER`, …) by
+/// [`crate::gpu::shaders::WGSL_CONSTANTS`].
+pub const MULTIPLIER: u32 = 747_796_405;
+/// See [`MULTIPLIER`].
+pub const INVERSE_MULTIPLIER: u32 = 3_425_435_293;
+/// See [`MULTIPLIER`].
+pub const INCREMENT: u32 = 2_891_336_453;
 
 /// PCG's output permutation (RXS-M-XS) of one LCG state.
 #[inline]
@@ -89,13 +92,12 @@ pub(crate) fn unit(bits: u32) -> f32 {
 
 /// The steps of the R₂ sequence, `1/φ₂` and `1/φ₂²` (`φ₂` the plastic
 /// number, `φ₂³ = φ₂ + 1`; Roberts 2018), in 32-bit fixed point, so that
-/// its points wrap exactly on both backends; mirrored in
-/// `shaders/common/rng.wgsl`.
-const R2_STEPS: [u32; 2] = [3_242_174_889, 2_447_445_414];
+/// its points wrap exactly on both backends; generated into the WGSL.
+pub const R2_STEPS: [u32; 2] = [3_242_174_889, 2_447_445_414];
 
 /// The "pass" of the stream that holds each pixel's offset of
-/// [`pixel_jitter`]: one no render reaches.
-const OFFSET_STREAM: u32 = u32::MAX;
+/// [`pixel_jitter`]: one no render reaches; generated into the WGSL.
+pub const PIXEL_OFFSET_STREAM: u32 = u32::MAX;
 
 /// Where in pixel `index` (`[0, 1)²`) the camera ray of `pass` goes in a
 /// render with `seed`: point `pass` of the R₂ low-discrepancy sequence,
@@ -111,7 +113,7 @@ const OFFSET_STREAM: u32 = u32::MAX;
 /// the plume and 28 % on the thick sphere.
 #[inline]
 pub fn pixel_jitter(seed: u64, index: u32, pass: u32) -> (f32, f32) {
-    let mut offset = Rng::for_sample(seed, index, OFFSET_STREAM);
+    let mut offset = Rng::for_sample(seed, index, PIXEL_OFFSET_STREAM);
     let (ox, oy) = (offset.next_u32(), offset.next_u32());
     (
         unit(ox.wrapping_add(pass.wrapping_mul(R2_STEPS[0]))),

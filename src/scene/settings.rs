@@ -210,9 +210,9 @@ impl Quality {
             // than 1/points: `lantern noise` measured the gather's
             // variance × time per pass 1.1–1.7× lower with 8 points than 4
             // over the suite (1.5× on the smoke and the plumes; validation
-            // §3.2). More points make passes
-            // longer and leave fewer light sets in a short render: 12 put
-            // two scenes' 8×8 blocks just past 5 % at 2 s, 8 none.
+            // §3.2). More points make passes longer and leave fewer light
+            // sets in a short render: 12 put two scenes' 8×8 blocks just
+            // past 5 % at 2 s, 8 none.
             light_samples: 8,
             view_share: 0.9,
             resample_every: 2,

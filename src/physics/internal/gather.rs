@@ -473,6 +473,22 @@ fn field_l1_at<D: DensityField>(
         if budget <= 0.0 {
             break;
         }
+        if scattering > 1 {
+            // Russian roulette on this further scattering, kept with the
+            // share of a window still left in the budget: its source is
+            // drawn within that budget and weighs it (`1/pdf(r)` is the
+            // budget over the rate), so its expected share shrinks with
+            // it, and the weight `1/keep` undoes that. The later
+            // scatterings of thin media are a few percent of `L₁` for as
+            // much work as the first.
+            let keep = (budget / cache.s_star).min(1.0);
+            if keep < 1.0 {
+                if rng.next_f32() >= keep {
+                    break;
+                }
+                throughput /= keep;
+            }
+        }
         let travel = phase::sample_hg(cache.g, towards, rng.next_f32(), rng.next_f32());
         let back = -travel;
         let Some((_, exit)) = vol.clip(point, back) else {
@@ -530,22 +546,6 @@ fn field_l1_at<D: DensityField>(
             break;
         }
         budget -= used;
-        if budget <= 0.0 {
-            break;
-        }
-        // Russian roulette on the next scattering, kept with the share of
-        // a window still left in the budget: its source is drawn within
-        // that budget and weighs it (`1/pdf(r)` is the budget over the
-        // rate), so its expected share shrinks with it, and the weight
-        // `1/keep` undoes that. The later scatterings of thin media are
-        // a few percent of `L₁` for as much work as the first.
-        let keep = (budget / cache.s_star).min(1.0);
-        if keep < 1.0 {
-            if rng.next_f32() >= keep {
-                break;
-            }
-            throughput /= keep;
-        }
         (point, rho_point, towards) = (xp, rho, travel);
     }
     sum
