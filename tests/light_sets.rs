@@ -195,27 +195,34 @@ fn balanced_renewal_measures_the_noise_of_passes_and_sets() {
     let pass = |p: u32, set: u32| luminance(&renderer.pass_in_set(p, set, &never).unwrap().total);
     let pixels = 16 * 16;
 
-    // Directly: a from 64 passes of set 0, b from 32 sets of 16 passes.
-    let one_set: Vec<Vec<f64>> = (0..64).map(|p| pass(p, 0)).collect();
-    let a = (0..pixels)
-        .map(|i| {
-            let m = one_set.iter().map(|x| x[i]).sum::<f64>() / 64.0;
-            one_set.iter().map(|x| (x[i] - m).powi(2)).sum::<f64>() / 63.0
-        })
-        .sum::<f64>()
-        / pixels as f64;
+    // Directly, from 32 sets of 16 passes: a as the spread of each set's
+    // passes about their mean, averaged over the sets (a pass's variance
+    // differs from set to set: a set with a bright, noisy light has more),
+    // and b from the spread of the sets' means. Every set here and in the
+    // schedule below is past the kernel's shrinking
+    // (`kernel_neighbours_for_set`: a render's first sets hold more lights
+    // in their kernel).
     let (sets, per_set) = (32u32, 16u32);
+    let mut within = 0.0;
     let means: Vec<Vec<f64>> = (0..sets)
         .map(|s| {
-            let mut m = vec![0.0; pixels];
-            for p in 0..per_set {
-                for (mi, x) in m.iter_mut().zip(pass(10_000 + s * per_set + p, 100 + s)) {
-                    *mi += x / f64::from(per_set);
-                }
-            }
+            let passes: Vec<Vec<f64>> = (0..per_set)
+                .map(|p| pass(10_000 + s * per_set + p, 100 + s))
+                .collect();
+            let m: Vec<f64> = (0..pixels)
+                .map(|i| passes.iter().map(|x| x[i]).sum::<f64>() / f64::from(per_set))
+                .collect();
+            within += (0..pixels)
+                .map(|i| {
+                    passes.iter().map(|x| (x[i] - m[i]).powi(2)).sum::<f64>()
+                        / f64::from(per_set - 1)
+                })
+                .sum::<f64>()
+                / pixels as f64;
             m
         })
         .collect();
+    let a = within / f64::from(sets);
     let spread = (0..pixels)
         .map(|i| {
             let m = means.iter().map(|x| x[i]).sum::<f64>() / f64::from(sets);

@@ -39,7 +39,7 @@ use super::support::load_square;
 use crate::cpu::pixel_ray;
 use crate::physics::internal::clock::GateSettings;
 use crate::physics::internal::gather::{gather, GatherSample};
-use crate::physics::internal::sources::InternalLights;
+use crate::physics::internal::sources::{InternalLights, InternalParams, KERNEL_NEIGHBOURS};
 use crate::physics::internal::walk::Walks;
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::rng::Rng;
@@ -63,6 +63,11 @@ pub struct NoiseArgs {
     /// Walks per measured light.
     #[arg(long, default_value_t = 2000)]
     pub walk_count: u32,
+    /// Lights the automatic kernel holds in every measured set (a render
+    /// shrinks it from 64 to 16 over its first sets; the sets measured
+    /// here share one kernel, so that their spread is noise alone).
+    #[arg(long, default_value_t = KERNEL_NEIGHBOURS)]
+    pub kernel_neighbours: u32,
     /// Internal-lights parameters (default: the scene's).
     #[command(flatten)]
     pub internal: InternalArgs,
@@ -265,6 +270,8 @@ pub fn light_walk_stats(
 /// What `lantern noise` measured.
 #[derive(Clone, Debug)]
 pub struct NoiseReport {
+    /// Lights the automatic kernel held in every measured set.
+    pub kernel_neighbours: u32,
     /// Seconds to build one light set (placement and walks), set 0.
     pub set_secs: f64,
     /// Gather noise (one set, fresh pixel streams).
@@ -286,7 +293,10 @@ pub fn measure(
     }
     let never = AtomicBool::new(false);
     let build = |set: u32| -> Result<Arc<InternalLights>> {
-        let params = internal_params_for_set(prepared, settings, set);
+        let params = InternalParams {
+            kernel_neighbours: args.kernel_neighbours.max(1),
+            ..internal_params_for_set(prepared, settings, set)
+        };
         prepared
             .build_internal_lights(&params, &never)
             .map(Arc::new)
@@ -321,6 +331,7 @@ pub fn measure(
         None
     };
     Ok(NoiseReport {
+        kernel_neighbours: args.kernel_neighbours.max(1),
         set_secs,
         gather,
         sets,
@@ -339,7 +350,7 @@ pub fn format_report(
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "\n### {name} {}×{}: noise of the internal lights (M {}, K {}, N {}, s* {}, SH order {}, {} light samples)\n",
+        "\n### {name} {}×{}: noise of the internal lights (M {}, K {}, N {}, s* {}, SH order {}, {} light samples, kernel of {} lights)\n",
         size.0,
         size.1,
         i.knobs.lights,
@@ -347,7 +358,8 @@ pub fn format_report(
         i.knobs.terms,
         i.knobs.s_star.map_or("scene default".to_owned(), |v| v.to_string()),
         i.expert.sh_order,
-        i.expert.light_samples
+        i.expert.light_samples,
+        r.kernel_neighbours
     );
     let _ = writeln!(
         s,
@@ -460,6 +472,7 @@ mod tests {
             passes: 1,
             walk_lights: 0,
             walk_count: 0,
+            kernel_neighbours: KERNEL_NEIGHBOURS,
             internal: InternalArgs::default(),
         };
         let err = run(&args).unwrap_err().to_string();
@@ -474,6 +487,7 @@ mod tests {
             passes: 12,
             walk_lights: 8,
             walk_count: 200,
+            kernel_neighbours: KERNEL_NEIGHBOURS,
             internal: InternalArgs {
                 lights: Some(1024),
                 walks: Some(walks),

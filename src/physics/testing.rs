@@ -194,6 +194,7 @@ pub(crate) fn sh1_params(
         walks: 1,
         sh_order: 1,
         kernel_radius: Some(kernel_radius),
+        kernel_neighbours: crate::physics::internal::sources::KERNEL_NEIGHBOURS,
         uniform_mix: 0.0,
         clock,
         l1,

@@ -10,7 +10,9 @@ use glam::Vec3;
 
 use crate::physics::environment::{EnvMap, Environment, EnvironmentKind};
 use crate::physics::internal::placement::PlacementDensity;
-use crate::physics::internal::sources::{placement_density, InternalLights, InternalParams};
+use crate::physics::internal::sources::{
+    kernel_neighbours_for_set, placement_density, InternalLights, InternalParams,
+};
 use crate::physics::internal::view_placement::ViewFrame;
 use crate::physics::lights::{Lights, PointLight, Sun};
 use crate::physics::volume::{DensityField, Optics, Volume};
@@ -410,7 +412,8 @@ pub fn light_set_starting(settings: &RenderSettings, pass: u32) -> Option<u32> {
 /// [`internal_params`] for light set `set`: the same parameters, with the
 /// seed of set 0 (the render's) advanced by `set` steps of the golden
 /// ratio (every stream hashes the whole seed, so the sets' placements and
-/// walks are independent).
+/// walks are independent), and the automatic kernel holding fewer lights
+/// in later sets ([`kernel_neighbours_for_set`]).
 pub fn internal_params_for_set(
     prepared: &PreparedScene,
     settings: &RenderSettings,
@@ -429,6 +432,7 @@ pub fn internal_params_for_set(
         walks: s.expert.walks,
         sh_order: s.expert.sh_order,
         kernel_radius: s.expert.kernel_radius,
+        kernel_neighbours: kernel_neighbours_for_set(set),
         uniform_mix: s.expert.uniform_mix,
         clock,
         l1: s.expert.l1,

@@ -118,10 +118,12 @@ pub struct Expert {
     pub walks: u32,
     /// Order of the real spherical harmonics that store `F` and `J`.
     pub sh_order: u32,
-    /// Kernel radius `h` (world units); `None`: 2.5 × the mean light
-    /// spacing (`physics::internal::sources::AUTO_KERNEL_FACTOR`; with lights in
-    /// the camera's view, the median distance to a light's 64th
-    /// neighbour).
+    /// Kernel radius `h` (world units); `None`: automatic, about 64
+    /// lights within it in a render's first light set and fewer, down to
+    /// 16, in later ones (`physics::internal::sources::kernel_neighbours_for_set`:
+    /// with lights in the camera's view the median distance to a light's
+    /// 64th, 32nd, 21st, then 16th neighbour; otherwise 2.5 × the mean
+    /// light spacing, scaled alike).
     pub kernel_radius: Option<f32>,
     /// Uniform fraction `u` of the placement density.
     pub uniform_mix: f32,

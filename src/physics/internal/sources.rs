@@ -141,9 +141,13 @@ pub struct InternalParams {
     pub walks: u32,
     /// SH order of `F` and the multiply scattered part of `J`.
     pub sh_order: u32,
-    /// Kernel radius `h`; `None`: the mean light spacing,
-    /// `median(V_i)^{1/3}`, times [`AUTO_KERNEL_FACTOR`].
+    /// Kernel radius `h`; `None`: automatic, for about
+    /// `kernel_neighbours` lights within it ([`kernel_radius_for`]).
     pub kernel_radius: Option<f32>,
+    /// About how many lights the automatic kernel radius holds
+    /// ([`KERNEL_NEIGHBOURS`] for a render's first set, fewer for later
+    /// ones: [`kernel_neighbours_for_set`]); unused with `kernel_radius`.
+    pub kernel_neighbours: u32,
     /// Uniform fraction `u` of the placement density.
     pub uniform_mix: f32,
     /// The path-length clock.
@@ -183,10 +187,33 @@ pub struct InternalParams {
 pub const AUTO_KERNEL_FACTOR: f32 = 2.5;
 
 /// The automatic kernel radius of lights placed in the camera's windows
-/// ([`InternalParams::view_share`]): the median distance from a light to
-/// its this-many-th nearest neighbour, about the number of lights inside
-/// [`AUTO_KERNEL_FACTOR`]'s support for lights that fill a volume.
-pub const KERNEL_NEIGHBOURS: usize = 64;
+/// ([`InternalParams::view_share`]) for the first light set of a render:
+/// the median distance from a light to its this-many-th nearest
+/// neighbour, about the number of lights inside [`AUTO_KERNEL_FACTOR`]'s
+/// support for lights that fill a volume. Later sets hold fewer
+/// ([`kernel_neighbours_for_set`]).
+pub const KERNEL_NEIGHBOURS: u32 = 64;
+
+/// The fewest lights the automatic kernel holds in any set. With 8 the
+/// plume's image came out 0.8 % dark and with 4 by 3.2 % (128 sets each):
+/// the normalised average reads zero where no light falls within `h`,
+/// and that chance grows fast as the kernel holds fewer.
+pub const KERNEL_NEIGHBOURS_FLOOR: u32 = 16;
+
+/// Lights the automatic kernel holds in light set `set` of a render
+/// (0-based): [`KERNEL_NEIGHBOURS`]` / (set + 1)`, at least
+/// [`KERNEL_NEIGHBOURS_FLOOR`] — 64, 32, 21, then 16.
+///
+/// The kernel's average blurs `J` over `h`: a bias that renewed sets do
+/// not average away, while the walks' noise they do. So, as progressive
+/// photon mapping shrinks its radius pass after pass, the sets shrink the
+/// kernel: the first set of a render (all that a single-set render or the
+/// previewer's first image has) is smooth, and once several sets share
+/// the image their noise is averaged over sets rather than over
+/// neighbours ([method §6.2](crate::doc::method)).
+pub fn kernel_neighbours_for_set(set: u32) -> u32 {
+    (KERNEL_NEIGHBOURS / set.saturating_add(1)).max(KERNEL_NEIGHBOURS_FLOOR)
+}
 
 /// The most scatterings inside the final window the gather follows
 /// ([`InternalParams::window_scatters`]): the settings' bound, defined with
@@ -409,18 +436,22 @@ impl LightSources {
 }
 
 /// The kernel radius `h` of `lights`: [`InternalParams::kernel_radius`],
-/// or by default [`AUTO_KERNEL_FACTOR`] times the mean light spacing
-/// `median(V_i)^{1/3}` (the box's volume per light if no light has a
-/// weight).
+/// or by default one that holds about [`InternalParams::kernel_neighbours`]
+/// lights — with lights in the camera's windows the median distance from
+/// a light to its that-many-th nearest neighbour, otherwise
+/// [`AUTO_KERNEL_FACTOR`]` · (neighbours / `[`KERNEL_NEIGHBOURS`]`)^{1/3}`
+/// times the mean light spacing `median(V_i)^{1/3}` (the box's volume per
+/// light if no light has a weight).
 pub fn kernel_radius_for<D: DensityField>(
     vol: &Volume<D>,
     params: &InternalParams,
     lights: &[InternalLight],
 ) -> f32 {
     params.kernel_radius.unwrap_or_else(|| {
+        let neighbours = params.kernel_neighbours.max(1);
         if params.view_share > 0.0 {
             let positions: Vec<Vec3> = lights.iter().map(|l| l.position).collect();
-            if let Some(r) = knn_kernel_radius(&positions, KERNEL_NEIGHBOURS, 512) {
+            if let Some(r) = knn_kernel_radius(&positions, neighbours as usize, 512) {
                 return r;
             }
         }
@@ -438,7 +469,8 @@ pub fn kernel_radius_for<D: DensityField>(
         } else {
             *v.select_nth_unstable_by(mid, f32::total_cmp).1
         };
-        AUTO_KERNEL_FACTOR * median.cbrt()
+        let factor = AUTO_KERNEL_FACTOR * (neighbours as f32 / KERNEL_NEIGHBOURS as f32).cbrt();
+        factor * median.cbrt()
     })
 }
 
@@ -1275,5 +1307,55 @@ mod tests {
         };
         let side = within_view_reach(&vol, &params, 0.1, &[at(1.9, -0.9)]);
         assert_eq!(side, [true]);
+    }
+
+    /// The automatic kernel shrinks over a render's sets (64, 32, 21, then
+    /// 16 neighbours), and the radius follows the neighbour count: the
+    /// `k`-th neighbour's median distance for lights in the camera's
+    /// windows (lights in a plane: `h ∝ √k`), the light spacing times
+    /// `(k/64)^{1/3}` for lights placed by density. An explicit radius
+    /// is kept whatever the set.
+    #[test]
+    fn the_kernel_shrinks_over_the_sets() {
+        let ks: Vec<u32> = (0..6).map(kernel_neighbours_for_set).collect();
+        assert_eq!(ks, [64, 32, 21, 16, 16, 16]);
+        assert_eq!(kernel_neighbours_for_set(u32::MAX), KERNEL_NEIGHBOURS_FLOOR);
+
+        let vol = cube(2.0, 0.9, 0.0);
+        // A 64 × 64 lattice in the plane z = 0, spacing 1/32.
+        let lights: Vec<InternalLight> = (0..64 * 64)
+            .map(|i| InternalLight {
+                position: Vec3::new((i % 64) as f32, (i / 64) as f32, 0.0) / 32.0 - 1.0,
+                density: 1.0,
+                weight: 0.0,
+            })
+            .collect();
+        let radius = |neighbours: u32, view_share: f32, kernel_radius: Option<f32>| {
+            let params = InternalParams {
+                kernel_radius,
+                kernel_neighbours: neighbours,
+                view_share,
+                ..sh1_params(Clock::OpticalDepth, 0.5, 4, 0.1, L1Form::Field)
+            };
+            kernel_radius_for(&vol, &params, &lights)
+        };
+        let (h64, h16) = (radius(64, 0.9, None), radius(16, 0.9, None));
+        // The disc that holds k lattice points has radius about √(k/π)
+        // spacings.
+        for (h, k) in [(h64, 64.0f32), (h16, 16.0)] {
+            let want = (k / std::f32::consts::PI).sqrt() / 32.0;
+            assert!((h / want - 1.0).abs() < 0.15, "{k}: {h} against {want}");
+        }
+        assert!(h16 < 0.6 * h64, "{h16} against {h64}");
+        // Without weights the spacing is the box's volume per light.
+        let spacing = (8.0f32 / lights.len() as f32).cbrt();
+        let dense = radius(64, 0.0, None);
+        assert!((dense / (AUTO_KERNEL_FACTOR * spacing) - 1.0).abs() < 1e-5);
+        let dense8 = radius(8, 0.0, None);
+        assert!(
+            (dense8 / dense - 0.5).abs() < 1e-5,
+            "{dense8} against {dense}"
+        );
+        assert_eq!(radius(16, 0.9, Some(0.3)), 0.3);
     }
 }
