@@ -66,7 +66,7 @@ pub struct NoiseArgs {
     /// Lights the automatic kernel holds in every measured set (a render
     /// shrinks it from 64 to 16 over its first sets; the sets measured
     /// here share one kernel, so that their spread is noise alone).
-    #[arg(long, default_value_t = KERNEL_NEIGHBOURS)]
+    #[arg(long, default_value_t = KERNEL_NEIGHBOURS, value_parser = clap::value_parser!(u32).range(1..))]
     pub kernel_neighbours: u32,
     /// Internal-lights parameters (default: the scene's).
     #[command(flatten)]
@@ -294,7 +294,7 @@ pub fn measure(
     let never = AtomicBool::new(false);
     let build = |set: u32| -> Result<Arc<InternalLights>> {
         let params = InternalParams {
-            kernel_neighbours: args.kernel_neighbours.max(1),
+            kernel_neighbours: args.kernel_neighbours,
             ..internal_params_for_set(prepared, settings, set)
         };
         prepared
@@ -331,7 +331,7 @@ pub fn measure(
         None
     };
     Ok(NoiseReport {
-        kernel_neighbours: args.kernel_neighbours.max(1),
+        kernel_neighbours: args.kernel_neighbours,
         set_secs,
         gather,
         sets,

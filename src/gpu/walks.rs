@@ -168,6 +168,7 @@ pub fn build_internal_lights_gpu(
     // camera's reach take their harmonics' value, as on the CPU.
     if params.view_walks > 0 {
         let reach = kernel_radius_for(&prepared.volume, params, &sources.lights);
+        sources.kernel_radius = Some(reach);
         let reached = within_view_reach(&prepared.volume, params, reach, &sources.lights);
         sources.view_from_harmonics_outside(params.sh_order.min(MAX_ORDER), params.eye, &reached);
     }

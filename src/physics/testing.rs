@@ -247,6 +247,7 @@ pub(crate) fn assemble(
             arrival: Vec::new(),
             term_energy: vec![Vec3::ZERO; 2],
             view: Vec::new(),
+            kernel_radius: None,
         },
         8.0,
     )

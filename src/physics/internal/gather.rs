@@ -627,6 +627,7 @@ mod tests {
                     arrival: Vec::new(),
                     term_energy: vec![Vec3::ZERO; 2],
                     view: Vec::new(),
+                    kernel_radius: None,
                 },
                 8.0,
             );
@@ -851,6 +852,7 @@ mod tests {
                         arrival: vec![Vec3::ONE],
                         term_energy: vec![Vec3::ZERO; terms as usize + 1],
                         view: Vec::new(),
+                        kernel_radius: None,
                     },
                     8.0,
                 );

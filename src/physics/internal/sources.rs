@@ -368,6 +368,11 @@ pub struct LightSources {
     /// of the collision (see the module doc, "Walks towards the eye");
     /// empty without view walks.
     pub view: Vec<Vec3>,
+    /// The kernel radius of these lights, if the walks already chose it
+    /// ([`kernel_radius_for`]: the view walks needed it to know which
+    /// lights the camera reads); `None`: [`InternalLights::assemble`]
+    /// chooses it.
+    pub kernel_radius: Option<f32>,
 }
 
 impl LightSources {
@@ -388,6 +393,7 @@ impl LightSources {
             arrival: Vec::with_capacity(m * n_ext),
             term_energy: vec![Vec3::ZERO; gates],
             view: Vec::new(),
+            kernel_radius: None,
         }
     }
 
@@ -708,13 +714,9 @@ impl InternalLights {
         let walks = params.walks.max(1);
         let tr_estimates = (walks / 4).clamp(4, 64);
         // The lights whose view walks the camera can read.
+        let kernel_radius = kernel_radius_for(vol, params, &lights);
         let reached = if params.view_walks > 0 {
-            within_view_reach(
-                vol,
-                params,
-                kernel_radius_for(vol, params, &lights),
-                &lights,
-            )
+            within_view_reach(vol, params, kernel_radius, &lights)
         } else {
             Vec::new()
         };
@@ -822,6 +824,7 @@ impl InternalLights {
             return None;
         }
         let mut sources = LightSources::with_capacity(lights, count, n_ext, terms + 1);
+        sources.kernel_radius = Some(kernel_radius);
         for w in walked.into_iter().flatten() {
             if params.view_walks > 0 {
                 sources.view.push(w.view);
@@ -855,12 +858,14 @@ impl InternalLights {
             arrival,
             term_energy,
             view,
+            kernel_radius,
         } = sources;
         let start = Instant::now();
         let order = params.sh_order.min(MAX_ORDER);
         let count = sh_count(order);
         let scatter = vol.optics.albedo * vol.optics.sigma_t;
-        let kernel_radius = kernel_radius_for(vol, params, &lights);
+        let kernel_radius =
+            kernel_radius.unwrap_or_else(|| kernel_radius_for(vol, params, &lights));
         let sigma_grey = vol.optics.sigma_t.max_element();
         let recon_scale: Vec<f32> = lights
             .iter()
