@@ -279,3 +279,50 @@ fn balanced_renewal_measures_the_noise_of_passes_and_sets() {
     assert_eq!(balanced.last_set(), 2);
     assert_eq!(balanced.balanced().map(|b| b.complete_sets()), Some(2));
 }
+
+/// The kernel each set of a timed render's balanced schedule holds
+/// (`BalancedRenewal::kernel_neighbours`), for the suite's `scene` at 48²
+/// with the defaults, over its first `sets` sets.
+fn balanced_kernels(scene: &str, sets: u32) -> Vec<u32> {
+    use lantern::cpu::{Passes, Renderer};
+    use std::sync::atomic::AtomicBool;
+    use std::time::Instant;
+
+    let prepared = Arc::new(common::prepare_with(scene, |s| {
+        s.camera.width = 48;
+        s.camera.height = 48;
+    }));
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    let never = AtomicBool::new(false);
+    let t = Instant::now();
+    let renderer = Renderer::new(prepared.clone(), &settings, &never).unwrap();
+    let mut passes = Passes::new(&renderer, true, t.elapsed().as_secs_f64());
+    let mut kernels = Vec::new();
+    while passes.balanced().map_or(0, |b| b.complete_sets()) < sets {
+        passes.next(&renderer, &never).unwrap();
+        let set = passes.last_set() as usize;
+        if kernels.len() == set {
+            kernels.push(passes.balanced().unwrap().kernel_neighbours());
+        }
+    }
+    kernels
+}
+
+/// A timed render keeps the first set's wide kernel where the light sets'
+/// noise outweighs the passes' and shrinks it where it does not: the thick
+/// cumulus's walks are tens of times noisier per second than its passes
+/// (`lantern noise`: variance × time 21 700 per set against 230 per pass),
+/// the wispy smoke's sets are a twentieth of its passes. Both after the
+/// first two sets, which follow the fixed schedule (64, 32 lights).
+#[test]
+fn timed_renders_keep_the_kernel_wide_where_the_sets_are_noisy() {
+    let cumulus = balanced_kernels("assets/scenes/suite/thick_cumulus.ron", 5);
+    eprintln!("cumulus kernels {cumulus:?}");
+    assert_eq!(&cumulus[..2], &[64, 32]);
+    assert!(cumulus[2..].iter().all(|&k| k == 64), "{cumulus:?}");
+    let wispy = balanced_kernels("assets/scenes/suite/wispy_smoke.ron", 5);
+    eprintln!("wispy smoke kernels {wispy:?}");
+    assert_eq!(&wispy[..4], &[64, 32, 21, 16], "{wispy:?}");
+    assert!(wispy[4..].iter().all(|&k| k == 16), "{wispy:?}");
+}

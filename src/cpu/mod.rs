@@ -18,7 +18,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::physics::internal::gather::gather;
-use crate::physics::internal::sources::InternalLights;
+use crate::physics::internal::sources::{InternalLights, InternalParams};
 use crate::physics::reference::radiance_split;
 use crate::physics::rng::{pixel_jitter, Rng};
 use crate::render::renewal::BalancedRenewal;
@@ -132,6 +132,27 @@ impl Renderer {
         let lights = Arc::new(self.prepared.build_internal_lights(&params, cancel)?);
         *later = Some((set, lights.clone()));
         Some(Some(lights))
+    }
+
+    /// Builds light set `set` (`set` ≥ 1) with an automatic kernel holding
+    /// `kernel_neighbours` lights instead of the set's own
+    /// ([`kernel_neighbours_for_set`](crate::physics::internal::sources::kernel_neighbours_for_set)),
+    /// and keeps it as the latest set ([`Renderer::lights_for_set`] then
+    /// returns it): what a balanced schedule chooses
+    /// ([`BalancedRenewal::kernel_neighbours`]). Nothing for the reference
+    /// method or set 0; `None` if `cancel` is set meanwhile.
+    pub fn build_set(&self, set: u32, kernel_neighbours: u32, cancel: &AtomicBool) -> Option<()> {
+        if self.internal.is_none() || set == 0 {
+            return Some(());
+        }
+        let params = InternalParams {
+            kernel_neighbours,
+            ..internal_params_for_set(&self.prepared, &self.settings, set)
+        };
+        let lights = Arc::new(self.prepared.build_internal_lights(&params, cancel)?);
+        let mut later = self.later.lock().unwrap_or_else(PoisonError::into_inner);
+        *later = Some((set, lights));
+        Some(())
     }
 
     /// One sample along the camera ray through film position `(px, py)`.
@@ -258,7 +279,7 @@ impl Passes {
         if self.pass > 0 && schedule.next_starts_set() {
             self.set += 1;
             let t = Instant::now();
-            renderer.lights_for_set(self.set, cancel)?;
+            renderer.build_set(self.set, schedule.kernel_neighbours(), cancel)?;
             schedule.add_set_build(t.elapsed().as_secs_f64());
         }
         let t = Instant::now();

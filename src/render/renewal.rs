@@ -24,6 +24,8 @@
 
 use glam::Vec3;
 
+use crate::physics::internal::sources::{kernel_neighbours_for_set, KERNEL_NEIGHBOURS};
+
 /// The longest set a balanced schedule chooses, in passes.
 pub const MAX_PERIOD: u32 = 64;
 
@@ -42,6 +44,13 @@ pub const MIN_SET_SHARE: f64 = 0.1;
 
 /// Sets that must be complete before the period is balanced.
 const SETS_BEFORE_BALANCING: u32 = 3;
+
+/// Sets that must be complete before a set's kernel follows the measured
+/// noise ([`BalancedRenewal::kernel_neighbours`]): the fewest whose means
+/// have a spread. The decision compares variances that differ by tens
+/// of times on the media where it matters, which the first two sets'
+/// spread over the image's pixels tells apart.
+const SETS_BEFORE_KERNEL: u32 = 2;
 
 /// The variance components and costs a balanced schedule is chosen from.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -123,6 +132,10 @@ pub struct BalancedRenewal {
     passes: u32,
     build_secs: f64,
     builds: u32,
+    /// The current set's kernel (lights it holds) and, over the complete
+    /// sets, the sum of [`KERNEL_NEIGHBOURS`] over their kernels.
+    kernel: u32,
+    kernel_factors: f64,
 }
 
 impl BalancedRenewal {
@@ -145,6 +158,8 @@ impl BalancedRenewal {
             passes: 0,
             build_secs: 0.0,
             builds: 0,
+            kernel: kernel_neighbours_for_set(0),
+            kernel_factors: 0.0,
         }
     }
 
@@ -178,8 +193,9 @@ impl BalancedRenewal {
     }
 
     /// Whether the next pass starts a new set: the current one has its
-    /// passes. If so, the current set's statistics are closed and the
-    /// period rebalanced.
+    /// passes. If so, the current set's statistics are closed, the period
+    /// rebalanced and the new set's kernel chosen
+    /// ([`BalancedRenewal::kernel_neighbours`]).
     pub fn next_starts_set(&mut self) -> bool {
         if self.passes_in_set < self.period {
             return false;
@@ -188,7 +204,45 @@ impl BalancedRenewal {
         if let Some(e) = self.estimates() {
             self.period = e.best_period();
         }
+        self.kernel = match self.sets_outweigh_passes() {
+            Some(true) => KERNEL_NEIGHBOURS,
+            _ => kernel_neighbours_for_set(self.sets),
+        };
         true
+    }
+
+    /// Lights the automatic kernel of the current set holds: set 0 and
+    /// every set while two are not yet complete, as every render's
+    /// ([`kernel_neighbours_for_set`]); later sets likewise where the
+    /// passes' noise outweighs the sets', but the first set's wide kernel
+    /// ([`KERNEL_NEIGHBOURS`]) where the sets' noise outweighs the passes'
+    /// ([`BalancedRenewal::sets_outweigh_passes`]).
+    ///
+    /// The kernel shrinks over a render's sets because its blur is a bias
+    /// that the sets' average keeps while their noise averages away
+    /// ([method §6.2](crate::doc::method)); a narrower kernel holds fewer
+    /// lights and each set is noisier (about `1/k`). Where the walks are
+    /// quiet next to the gather (thin smoke) the image's error is the
+    /// passes' noise and the blur, and shrinking pays. Where they are not
+    /// (a thick cumulus: one set's sd was 170 % of the image mean per
+    /// pixel against 60 % for a pass), the image's error is the sets' noise
+    /// for as long as a render runs, and a kernel holding 16 lights had
+    /// 1.8× the per-pixel error of one holding 64 at 8 s.
+    pub fn kernel_neighbours(&self) -> u32 {
+        self.kernel
+    }
+
+    /// Whether the light sets add more noise to the image than the passes
+    /// at the balanced period, `b d ≥ a c` (`b P* ≥ a` at `P* = √(ad/(bc))`:
+    /// the set variance `b/n` of the mean of `n` sets against the passes'
+    /// `a/(n P*)`), with `b` scaled to the first set's kernel (`b` grows as
+    /// `1/k`: the sets measured may have had narrower ones). `None` before
+    /// the estimates ([`BalancedRenewal::estimates`]).
+    pub fn sets_outweigh_passes(&self) -> Option<bool> {
+        let e = self.estimates_after(SETS_BEFORE_KERNEL)?;
+        let narrowing = self.kernel_factors / f64::from(self.sets);
+        let b = e.set_variance / narrowing.max(1.0);
+        Some(b * e.set_secs >= e.pass_variance * e.pass_secs)
     }
 
     fn close_set(&mut self) {
@@ -206,6 +260,7 @@ impl BalancedRenewal {
         }
         self.within_dof += pixels as f64 * (n - 1.0);
         self.sets += 1;
+        self.kernel_factors += f64::from(KERNEL_NEIGHBOURS) / f64::from(self.kernel.max(1));
         self.inverse_lengths += 1.0 / n;
         self.sum.fill(0.0);
         self.squares.fill(0.0);
@@ -217,7 +272,12 @@ impl BalancedRenewal {
     /// `b + a · mean(1/n_s)` (independent sets of `n_s` passes, each
     /// mean's variance `b + a/n_s`), which gives `b`.
     pub fn estimates(&self) -> Option<RenewalEstimates> {
-        if self.sets < SETS_BEFORE_BALANCING
+        self.estimates_after(SETS_BEFORE_BALANCING)
+    }
+
+    /// [`BalancedRenewal::estimates`] once `sets` sets are complete.
+    fn estimates_after(&self, sets: u32) -> Option<RenewalEstimates> {
+        if self.sets < sets.max(2)
             || self.within_dof <= 0.0
             || self.builds == 0
             || self.passes == 0
@@ -333,5 +393,57 @@ mod tests {
             ..none
         };
         assert_eq!(cheap_sets.best_period(), 1, "free sets: renew every pass");
+    }
+    /// The kernels a balanced schedule gives its sets, on passes made as in
+    /// [`recovers_the_variance_components_and_the_best_period`] but with
+    /// each set's effect of variance `b₆₄ · 64/k` for the kernel of `k`
+    /// lights it was given (a kernel average of independent lights). The
+    /// first two sets always take the schedule's 64 and 32; then where the
+    /// sets' noise outweighs the passes' (`b₆₄ d ≥ a c`) every set keeps
+    /// 64, and where it does not they shrink to 21 and 16 — also when the
+    /// narrower kernels' sets, measured unscaled, would outweigh the
+    /// passes (`b₆₄` 0.6 against `a c/d` 1, the sets at 16 lights 2.4).
+    #[test]
+    fn the_kernel_stays_wide_where_the_sets_outweigh_the_passes() {
+        let kernels = |a: f64, b64: f64, c: f64, d: f64| {
+            let pixels = 4096;
+            let mut rng = Rng::for_sample(9, 0, 0);
+            let mut renewal = BalancedRenewal::new(pixels, 2);
+            renewal.add_set_build(d);
+            let mut kernels = vec![renewal.kernel_neighbours()];
+            let mut effect = vec![0.0f64; pixels];
+            let draw = |k: u32, effect: &mut Vec<f64>, rng: &mut Rng| {
+                let sd = (b64 * 64.0 / f64::from(k)).sqrt();
+                for e in effect.iter_mut() {
+                    *e = sd * normal(rng);
+                }
+            };
+            draw(kernels[0], &mut effect, &mut rng);
+            for pass in 0..120 {
+                if pass > 0 && renewal.next_starts_set() {
+                    kernels.push(renewal.kernel_neighbours());
+                    draw(renewal.kernel_neighbours(), &mut effect, &mut rng);
+                    renewal.add_set_build(d);
+                }
+                let image: Vec<Vec3> = effect
+                    .iter()
+                    .map(|&e| Vec3::splat((1.0 + e + a.sqrt() * normal(&mut rng)) as f32))
+                    .collect();
+                renewal.add_pass(&image, c);
+            }
+            (kernels, renewal.sets_outweigh_passes())
+        };
+        let (noisy_sets, outweigh) = kernels(1.0, 4.0, 0.1, 0.4);
+        assert_eq!(&noisy_sets[..2], &[64, 32], "{noisy_sets:?}");
+        assert!(noisy_sets[2..].iter().all(|&k| k == 64), "{noisy_sets:?}");
+        assert_eq!(outweigh, Some(true));
+        let (quiet_sets, outweigh) = kernels(4.0, 0.25, 0.1, 0.4);
+        assert_eq!(&quiet_sets[..4], &[64, 32, 21, 16], "{quiet_sets:?}");
+        assert!(quiet_sets[4..].iter().all(|&k| k == 16), "{quiet_sets:?}");
+        assert_eq!(outweigh, Some(false));
+        let (scaled, outweigh) = kernels(1.0, 0.6, 1.0, 1.0);
+        assert_eq!(&scaled[..4], &[64, 32, 21, 16], "{scaled:?}");
+        assert!(scaled[4..].iter().all(|&k| k == 16), "{scaled:?}");
+        assert_eq!(outweigh, Some(false));
     }
 }
