@@ -286,9 +286,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                         e.pass_variance, e.set_variance, e.pass_secs, e.set_secs
                     )
                 });
+                let kernel = match b.sets_outweigh_passes() {
+                    Some(true) => "kept wide: the sets' noise outweighs the passes'",
+                    Some(false) => "shrunk: the passes' noise outweighs the sets'",
+                    None => "as scheduled",
+                };
                 println!(
-                    "{sets} more light sets, balanced against the passes: the last {} passes long{estimates}, walked within the render time below",
-                    b.period()
+                    "{sets} more light sets, balanced against the passes: the last {} passes long{estimates}, its kernel of {} lights ({kernel}), walked within the render time below",
+                    b.period(),
+                    b.kernel_neighbours()
                 );
             }
         }

@@ -314,6 +314,15 @@ mod tests {
         (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
     }
 
+    /// One pass's image: 1 plus the set's per-pixel `effect` plus
+    /// independent noise of variance `a`.
+    fn pass_image(effect: &[f64], a: f64, rng: &mut Rng) -> Vec<Vec3> {
+        effect
+            .iter()
+            .map(|&e| Vec3::splat((1.0 + e + a.sqrt() * normal(rng)) as f32))
+            .collect()
+    }
+
     /// Passes made of a per-pixel set effect of variance `b`, shared by a
     /// set's passes, plus independent pass noise of variance `a`: the
     /// schedule recovers both (within 10 %) and chooses `√(ad/(bc))`.
@@ -334,11 +343,7 @@ mod tests {
                 }
                 renewal.add_set_build(d);
             }
-            let image: Vec<Vec3> = effect
-                .iter()
-                .map(|&e| Vec3::splat((1.0 + e + a.sqrt() * normal(&mut rng)) as f32))
-                .collect();
-            renewal.add_pass(&image, c);
+            renewal.add_pass(&pass_image(&effect, a, &mut rng), c);
         }
         let e = renewal.estimates().expect("estimates after 200 passes");
         assert!((e.pass_variance / a - 1.0).abs() < 0.1, "{e:?}");
@@ -425,11 +430,7 @@ mod tests {
                     draw(renewal.kernel_neighbours(), &mut effect, &mut rng);
                     renewal.add_set_build(d);
                 }
-                let image: Vec<Vec3> = effect
-                    .iter()
-                    .map(|&e| Vec3::splat((1.0 + e + a.sqrt() * normal(&mut rng)) as f32))
-                    .collect();
-                renewal.add_pass(&image, c);
+                renewal.add_pass(&pass_image(&effect, a, &mut rng), c);
             }
             (kernels, renewal.sets_outweigh_passes())
         };

@@ -123,7 +123,9 @@ pub struct Expert {
     /// 16, in later ones (`physics::internal::sources::kernel_neighbours_for_set`:
     /// with lights in the camera's view the median distance to a light's
     /// 64th, 32nd, 21st, then 16th neighbour; otherwise 2.5 × the mean
-    /// light spacing, scaled alike).
+    /// light spacing, scaled alike); a render with a time limit keeps 64
+    /// where its light sets' noise outweighs its passes'
+    /// (`render::renewal::BalancedRenewal::kernel_neighbours`).
     pub kernel_radius: Option<f32>,
     /// Uniform fraction `u` of the placement density.
     pub uniform_mix: f32,
