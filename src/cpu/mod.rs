@@ -129,9 +129,7 @@ impl Renderer {
             }
         }
         let params = internal_params_for_set(&self.prepared, &self.settings, set);
-        let lights = Arc::new(self.prepared.build_internal_lights(&params, cancel)?);
-        *later = Some((set, lights.clone()));
-        Some(Some(lights))
+        self.build_kept(&mut later, set, &params, cancel).map(Some)
     }
 
     /// Builds light set `set` (`set` ≥ 1) with an automatic kernel holding
@@ -149,10 +147,23 @@ impl Renderer {
             kernel_neighbours,
             ..internal_params_for_set(&self.prepared, &self.settings, set)
         };
-        let lights = Arc::new(self.prepared.build_internal_lights(&params, cancel)?);
         let mut later = self.later.lock().unwrap_or_else(PoisonError::into_inner);
-        *later = Some((set, lights));
-        Some(())
+        self.build_kept(&mut later, set, &params, cancel)
+            .map(|_| ())
+    }
+
+    /// Builds light set `set` with `params` and keeps it in `later` (the
+    /// locked cache of the latest set); `None` if `cancel` is set meanwhile.
+    fn build_kept(
+        &self,
+        later: &mut Option<(u32, Arc<InternalLights>)>,
+        set: u32,
+        params: &InternalParams,
+        cancel: &AtomicBool,
+    ) -> Option<Arc<InternalLights>> {
+        let lights = Arc::new(self.prepared.build_internal_lights(params, cancel)?);
+        *later = Some((set, lights.clone()));
+        Some(lights)
     }
 
     /// One sample along the camera ray through film position `(px, py)`.

@@ -201,10 +201,13 @@ impl BalancedRenewal {
             return false;
         }
         self.close_set();
-        if let Some(e) = self.estimates() {
+        // One pass over the pixels for both choices: the period waits for
+        // more sets than the kernel.
+        let estimates = self.estimates_after(SETS_BEFORE_KERNEL);
+        if let Some(e) = estimates.filter(|_| self.sets >= SETS_BEFORE_BALANCING) {
             self.period = e.best_period();
         }
-        self.kernel = match self.sets_outweigh_passes() {
+        self.kernel = match estimates.map(|e| self.outweighs(&e)) {
             Some(true) => KERNEL_NEIGHBOURS,
             _ => kernel_neighbours_for_set(self.sets),
         };
@@ -239,10 +242,16 @@ impl BalancedRenewal {
     /// `1/k`: the sets measured may have had narrower ones). `None` before
     /// the estimates ([`BalancedRenewal::estimates`]).
     pub fn sets_outweigh_passes(&self) -> Option<bool> {
-        let e = self.estimates_after(SETS_BEFORE_KERNEL)?;
+        self.estimates_after(SETS_BEFORE_KERNEL)
+            .map(|e| self.outweighs(&e))
+    }
+
+    /// [`BalancedRenewal::sets_outweigh_passes`] for estimates `e` of the
+    /// complete sets.
+    fn outweighs(&self, e: &RenewalEstimates) -> bool {
         let narrowing = self.kernel_factors / f64::from(self.sets);
         let b = e.set_variance / narrowing.max(1.0);
-        Some(b * e.set_secs >= e.pass_variance * e.pass_secs)
+        b * e.set_secs >= e.pass_variance * e.pass_secs
     }
 
     fn close_set(&mut self) {
