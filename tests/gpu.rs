@@ -1564,3 +1564,136 @@ fn gather_gives_the_cpus_estimate_for_the_same_random_numbers() {
         common::compare_gathers_same_streams(label, &ctx, &prepared, &settings, &lights, 16);
     }
 }
+
+// ---------------------------------------------------------------------------
+// Balanced light sets on the GPU (render::renewal, session::GpuPasses).
+
+/// The accumulated moments of the channels' mean that the GPU keeps
+/// (`GpuAccum::grey_m2`, read as sums by `GpuImage::grey_sums`) are the sums
+/// of its passes' own values, cross terms of the channels included: the
+/// chromatic sphere (channels of different extinction) at 16², 8 passes of
+/// the reference method, each pass also rendered alone.
+#[test]
+fn accumulated_grey_moments_are_the_passes_sums() {
+    let Some(ctx) = common::gpu() else { return };
+    let prepared = prepare_small("assets/scenes/chromatic_sphere.ron", 16);
+    let passes = 8;
+    let mut alone = GpuRenderer::reference(&ctx, &prepared, 5).unwrap_or_else(|e| panic!("{e:#}"));
+    let mut expected = vec![(0.0f64, 0.0f64); 16 * 16];
+    for pass in 0..passes {
+        alone.reset(5);
+        alone.add_pass(pass);
+        let image = alone.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+        for (e, p) in expected.iter_mut().zip(&image.pixels) {
+            let x = f64::from(p.mean().element_sum()) / 3.0;
+            *e = (e.0 + x, e.1 + x * x);
+        }
+    }
+    let mut accumulated =
+        GpuRenderer::reference(&ctx, &prepared, 5).unwrap_or_else(|e| panic!("{e:#}"));
+    for pass in 0..passes {
+        accumulated.add_pass(pass);
+    }
+    let sums = accumulated
+        .read_back()
+        .unwrap_or_else(|e| panic!("{e:#}"))
+        .grey_sums();
+    let scale = expected.iter().map(|e| e.1).fold(0.0f64, f64::max);
+    assert!(scale > 0.0);
+    let (mut worst_sum, mut worst_squares, mut spread) = (0.0f64, 0.0f64, 0.0f64);
+    for (got, want) in sums.iter().zip(&expected) {
+        worst_sum = worst_sum.max((got.0 - want.0).abs());
+        worst_squares = worst_squares.max((got.1 - want.1).abs());
+        spread += want.1 - want.0 * want.0 / f64::from(passes);
+    }
+    println!(
+        "grey moments on the GPU: largest differences {worst_sum:.2e} (sums), {worst_squares:.2e} (squares), largest sum of squares {scale:.3e}, pooled spread {spread:.3e}"
+    );
+    assert!(spread > 1e-3 * scale, "the passes must differ: {spread}");
+    assert!(
+        worst_sum <= 1e-5 * scale.sqrt() * f64::from(passes),
+        "{worst_sum}"
+    );
+    assert!(worst_squares <= 1e-5 * scale, "{worst_squares}");
+}
+
+/// A balanced GPU schedule (`GpuPasses`, sets built on the CPU as the
+/// previewer builds them) on the suite's `scene` at 32² with the defaults,
+/// over its first `sets` sets: the kernel each set held, and the schedule.
+fn gpu_balanced(
+    ctx: &lantern::gpu::GpuContext,
+    scene: &str,
+    sets: u32,
+) -> (Vec<u32>, lantern::render::renewal::BalancedRenewal) {
+    use lantern::session::{GpuPasses, LightBuilder, Renewal};
+
+    let prepared = prepare_small(scene, 32);
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    let lights = common::build_lights(&prepared, &settings);
+    let mut renderer = GpuRenderer::internal(
+        ctx,
+        &prepared,
+        &lights,
+        settings.internal.expert.light_samples,
+        settings.seed,
+    )
+    .unwrap_or_else(|e| panic!("{e:#}"));
+    let mut passes = GpuPasses::new(&renderer, &settings, true, lights.timings.total());
+    let never = AtomicBool::new(false);
+    let mut kernels = vec![passes.balanced().expect("balanced").kernel_neighbours()];
+    while passes.balanced().map_or(0, |b| b.complete_sets()) < sets {
+        let renewal = passes
+            .next(
+                &mut renderer,
+                &prepared,
+                &settings,
+                LightBuilder::Cpu(&never),
+            )
+            .unwrap_or_else(|e| panic!("{e:#}"));
+        if let Renewal::Renewed(set) = renewal {
+            assert_eq!(set as usize, kernels.len());
+            kernels.push(passes.balanced().expect("balanced").kernel_neighbours());
+        }
+    }
+    let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
+    assert_eq!(image.cut_short_passes(), 0, "{scene}: passes cut short");
+    (kernels, passes.balanced().expect("balanced").clone())
+}
+
+/// The balanced GPU schedule measures the passes' and the sets' noise
+/// from its read-backs and decides as the CPU's does from its passes
+/// (`light_sets::timed_renders_keep_the_kernel_wide_where_the_sets_are_noisy`):
+/// after five sets the thick cumulus's sets outweigh its passes and keep
+/// the first set's 64 lights, the wispy smoke's do not and shrink to 16.
+/// The first two sets follow the fixed schedule (64, 32). On lavapipe
+/// with two cores `b d/(a c)` read 7.3 and 21 on the cumulus in two runs
+/// (its variance estimates are heavy-tailed; a GPU's faster passes only
+/// raise it), −0.02 on the smoke.
+#[test]
+fn balanced_gpu_passes_keep_the_kernel_wide_where_the_sets_are_noisy() {
+    let Some(ctx) = common::gpu() else { return };
+    for (scene, noisy_sets) in [
+        ("assets/scenes/suite/thick_cumulus.ron", true),
+        ("assets/scenes/suite/wispy_smoke.ron", false),
+    ] {
+        let (kernels, schedule) = gpu_balanced(&ctx, scene, 5);
+        let e = schedule.estimates().expect("estimates after five sets");
+        println!(
+            "{scene} on the GPU: kernels {kernels:?}, b d/(a c) {:.3} ({e:?})",
+            e.set_variance * e.set_secs / (e.pass_variance * e.pass_secs)
+        );
+        assert_eq!(&kernels[..2], &[64, 32], "{scene}");
+        assert_eq!(
+            schedule.sets_outweigh_passes(),
+            Some(noisy_sets),
+            "{scene}: {e:?}"
+        );
+        let last = kernels[kernels.len() - 1];
+        assert_eq!(
+            last,
+            if noisy_sets { 64 } else { 16 },
+            "{scene}: {kernels:?}"
+        );
+    }
+}

@@ -8,7 +8,9 @@
 // One pixel's running statistics: `mean` and `m2` of the full estimate,
 // `single_mean` of its single-scattering part; `mean.w` counts the passes
 // whose invocation the driver's loop cap cut short (`loops_cut_short`),
-// the other w components are unused.
+// `m2.w` is the sum of squared deviations of the channels' mean (whose
+// running mean is that of `mean.xyz`: what a balanced light-set schedule
+// pools, src/render/renewal.rs), `single_mean.w` is unused.
 struct Accum {
     mean: vec4<f32>,
     m2: vec4<f32>,
@@ -53,7 +55,14 @@ fn accumulate(a: Accum, total: vec3<f32>, single: vec3<f32>, count: u32, cut: bo
     let delta = x - a.mean.xyz;
     let mean = a.mean.xyz + delta / n;
     let m2 = a.m2.xyz + delta * (x - mean);
+    let third = vec3<f32>(1.0 / 3.0);
+    let grey = dot(x, third);
+    let grey_m2 = a.m2.w + (grey - dot(a.mean.xyz, third)) * (grey - dot(mean, third));
     let single_mean = a.single_mean.xyz + (s - a.single_mean.xyz) / n;
     let cut_passes = a.mean.w + select(0.0, 1.0, cut);
-    return Accum(vec4<f32>(mean, cut_passes), vec4<f32>(m2, 0.0), vec4<f32>(single_mean, 0.0));
+    return Accum(
+        vec4<f32>(mean, cut_passes),
+        vec4<f32>(m2, grey_m2),
+        vec4<f32>(single_mean, 0.0),
+    );
 }

@@ -189,8 +189,10 @@ pub struct TimedArgs {
     pub variance: Option<PathBuf>,
     /// With `--time`, renew the internal lights' set every
     /// `resample_every` passes as a render of fixed spp does, instead of
-    /// balancing the sets' length against the passes from the noise and
-    /// the costs measured while rendering (CPU backend).
+    /// balancing the sets' length and kernel against the passes from the
+    /// noise and the costs measured while rendering (both backends; the
+    /// GPU's balanced schedule reads its accumulated moments back once per
+    /// set).
     #[arg(long)]
     pub fixed_renewal: bool,
 }

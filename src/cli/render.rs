@@ -16,10 +16,11 @@ use super::support::{gpu_context, gpu_renderer};
 use crate::cpu::{Passes, Renderer};
 use crate::render::export::{write_exr_with_metadata, write_image};
 use crate::render::film::image_mean;
+use crate::render::renewal::BalancedRenewal;
 use crate::render::tonemap::ViewTransform;
 use crate::render::{internal_params, Film, PreparedScene};
 use crate::scene::{Method, RenderSettings, Scene};
-use crate::session::{renew_gpu_lights, Backend, LightBuilder, Renewal};
+use crate::session::{Backend, GpuPasses, LightBuilder, Renewal};
 
 /// Options of `lantern render`.
 #[derive(Clone, Debug, clap::Args)]
@@ -272,33 +273,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let spent = t_build.elapsed().as_secs_f64();
     bar.finish_and_clear();
     check_flights()?;
-    let sets = passes.last_set();
-    if method == Method::Internal && sets > 0 {
-        match passes.balanced() {
-            None => println!(
-                "{sets} more light sets (one every {} passes), walked within the render time below",
-                settings.internal.expert.resample_every
-            ),
-            Some(b) => {
-                let estimates = b.estimates().map_or(String::new(), |e| {
-                    format!(
-                        " (per-pixel variance of a pass {:.3e}, of a set {:.3e}; {:.3} s a pass, {:.3} s a set)",
-                        e.pass_variance, e.set_variance, e.pass_secs, e.set_secs
-                    )
-                });
-                let kernel = match b.sets_outweigh_passes() {
-                    Some(true) => "kept wide: the sets' noise outweighs the passes'",
-                    Some(false) => "shrunk: the passes' noise outweighs the sets'",
-                    None => "as scheduled",
-                };
-                println!(
-                    "{sets} more light sets, balanced against the passes: the last {} passes long{estimates}, its kernel of {} lights ({kernel}), walked within the render time below",
-                    b.period(),
-                    b.kernel_neighbours()
-                );
-            }
-        }
-    }
+    print_sets(
+        &settings,
+        passes.last_set(),
+        passes.balanced(),
+        ", walked within the render time below",
+    );
     let secs = start.elapsed().as_secs_f64();
     let samples = w as f64 * h as f64 * film.samples as f64;
     let s_star = renderer.internal_lights().map(|l| l.s_star);
@@ -440,6 +420,40 @@ fn print_time_limit(timed: &TimedArgs, spp: u32, spent: f64) {
     }
 }
 
+/// What a render's renewed light sets were, after it: how many, and how
+/// long the last lasted and what its kernel held where the schedule was
+/// balanced (`extra` ends the line: where the time went).
+fn print_sets(
+    settings: &RenderSettings,
+    sets: u32,
+    balanced: Option<&BalancedRenewal>,
+    extra: &str,
+) {
+    if settings.method != Method::Internal || sets == 0 {
+        return;
+    }
+    match balanced {
+        None => println!(
+            "{sets} more light sets (one every {} passes){extra}",
+            settings.internal.expert.resample_every
+        ),
+        Some(b) => {
+            let estimates = b.estimates().map_or(String::new(), |e| {
+                format!(
+                    " (per-pixel variance of a pass {:.3e}, of a set {:.3e}; {:.3} s a pass, {:.3} s a set)",
+                    e.pass_variance, e.set_variance, e.pass_secs, e.set_secs
+                )
+            });
+            println!(
+                "{sets} more light sets, balanced against the passes: the last {} passes long{estimates}, its kernel of {} lights ({}){extra}",
+                b.period(),
+                b.kernel_neighbours(),
+                b.kernel_reason()
+            );
+        }
+    }
+}
+
 /// `render --backend gpu`: the reference method on the GPU, accumulated
 /// there and read back once for the image file.
 fn render_gpu(
@@ -454,42 +468,41 @@ fn render_gpu(
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let ctx = gpu_context()?;
     let t_build = Instant::now();
-    let (mut renderer, _) = gpu_renderer(&ctx, prepared, settings)?;
+    let (mut renderer, timings) = gpu_renderer(&ctx, prepared, settings)?;
     renderer.finish()?;
     let build_secs = t_build.elapsed().as_secs_f64();
+    // Set 0's own build time (without the pipelines' compilation), which
+    // a balanced schedule weighs later sets' builds against.
+    let set_secs = timings.map_or(build_secs, |t| t.total());
     let bar = pass_bar(rule);
     let start = Instant::now();
-    let mut sets = 0;
+    let balanced = timed.time.is_some() && !timed.fixed_renewal;
+    let mut passes = GpuPasses::new(&renderer, settings, balanced, set_secs);
     let mut resample_secs = 0.0;
-    let mut pass = 0;
-    while rule.another(pass, t_build.elapsed().as_secs_f64()) {
+    while rule.another(passes.passes(), t_build.elapsed().as_secs_f64()) {
         // A fresh light set when the pass starts one, walked on the GPU
         // like the first.
         let t = Instant::now();
-        let builder = LightBuilder::Gpu(&ctx);
-        let renewal = renew_gpu_lights(&mut renderer, prepared, settings, pass, builder)?;
-        if let Renewal::Renewed(set) = renewal {
-            sets = set;
+        let renewal = passes.next(&mut renderer, prepared, settings, LightBuilder::Gpu(&ctx))?;
+        if let Renewal::Renewed(_) = renewal {
             resample_secs += t.elapsed().as_secs_f64();
         }
-        renderer.add_pass(pass);
         // Waiting after each pass keeps the progress bar honest and the
         // queue short; the accumulation itself stays on the GPU.
         renderer.finish()?;
-        if let (0, Some(n)) = (pass, rule.max_spp) {
+        if let (1, Some(n)) = (passes.passes(), rule.max_spp) {
             warn_long_render(start.elapsed().as_secs_f64(), n);
         }
         bar.inc(1);
-        pass += 1;
     }
     let spent = t_build.elapsed().as_secs_f64();
     bar.finish_and_clear();
-    if sets > 0 {
-        println!(
-            "{sets} more light sets (one every {} passes) walked in {resample_secs:.2} s, included below",
-            settings.internal.expert.resample_every
-        );
-    }
+    print_sets(
+        settings,
+        passes.last_set(),
+        passes.balanced(),
+        &format!(", walked in {resample_secs:.2} s, included below"),
+    );
     let secs = start.elapsed().as_secs_f64();
     let image = renderer.read_back()?;
     warn_cut_short(&image);

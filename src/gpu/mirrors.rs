@@ -349,8 +349,9 @@ const _: () = assert!(std::mem::size_of::<GpuWalkParams>() == 64);
 /// squared deviations of the estimate, and the mean of its single-scattering
 /// part; `mean[3]` counts the passes that the driver's loop cap cut short
 /// (see [`GpuImage::cut_short_passes`](super::GpuImage::cut_short_passes)),
-/// the other `w` are unused. Keep in sync with `Accum` in
-/// `shaders/common/accumulate.wgsl`.
+/// `m2[3]` is the sum of squared deviations of the channels' mean
+/// ([`GpuAccum::grey_m2`]), `single_mean[3]` is unused. Keep in sync with
+/// `Accum` in `shaders/common/accumulate.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct GpuAccum {
@@ -526,6 +527,15 @@ impl GpuAccum {
     /// The sum of squared deviations of the estimate.
     pub fn m2(&self) -> Vec3 {
         Vec3::from_slice(&self.m2[..3])
+    }
+
+    /// The sum of squared deviations of the channels' mean `(r + g + b)/3`
+    /// over the passes (its running mean is that of [`GpuAccum::mean`]'s
+    /// channels): what a balanced light-set schedule pools over the pixels
+    /// ([`crate::render::renewal::BalancedRenewal`]), which the channels'
+    /// own sums of squares cannot give (they lack the cross terms).
+    pub fn grey_m2(&self) -> f32 {
+        self.m2[3]
     }
 
     /// The running mean of the single-scattering part.

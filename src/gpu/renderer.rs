@@ -298,6 +298,22 @@ impl GpuImage {
         Film::from_moments(self.width, self.height, self.samples, &mean, &m2)
     }
 
+    /// Per pixel the sum and the sum of squares of the channels' mean
+    /// `(r + g + b)/3` over the accumulated passes, from the running mean
+    /// and [`GpuAccum::grey_m2`]: the moments a balanced light-set schedule
+    /// takes ([`crate::render::renewal::BalancedRenewal::replace_set_sums`],
+    /// as differences between two read-backs).
+    pub fn grey_sums(&self) -> Vec<(f64, f64)> {
+        let n = f64::from(self.samples);
+        self.pixels
+            .iter()
+            .map(|p| {
+                let m = f64::from(p.mean().element_sum()) / 3.0;
+                (n * m, f64::from(p.grey_m2()) + n * m * m)
+            })
+            .collect()
+    }
+
     /// The single-scattering part's mean image.
     pub fn single_mean(&self) -> Vec<Vec3> {
         self.pixels.iter().map(GpuAccum::single_mean).collect()

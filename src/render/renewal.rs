@@ -109,7 +109,11 @@ impl RenewalEstimates {
 /// A light-set schedule balanced while the render runs (see the module).
 /// Feed it every pass ([`BalancedRenewal::add_pass`]) and every set's build
 /// time ([`BalancedRenewal::add_set_build`], set 0's included); before
-/// each pass after the first ask [`BalancedRenewal::next_starts_set`].
+/// each pass after the first ask [`BalancedRenewal::next_starts_set`]. A
+/// renderer that accumulates its passes elsewhere (the GPU) gives their
+/// times ([`BalancedRenewal::add_pass_secs`]) and, once the set is
+/// complete ([`BalancedRenewal::set_is_complete`]), the set's sums
+/// ([`BalancedRenewal::replace_set_sums`]).
 #[derive(Clone, Debug)]
 pub struct BalancedRenewal {
     period: u32,
@@ -186,6 +190,38 @@ impl BalancedRenewal {
         self.passes += 1;
     }
 
+    /// Adds one pass of the current set whose image is accumulated
+    /// elsewhere (on the GPU), and the seconds it took: the set's per-pixel
+    /// sums come at its end from [`BalancedRenewal::replace_set_sums`].
+    pub fn add_pass_secs(&mut self, secs: f64) {
+        self.passes_in_set += 1;
+        self.pass_secs += secs;
+        self.passes += 1;
+    }
+
+    /// Whether the current set has its passes: the next
+    /// [`BalancedRenewal::next_starts_set`] closes it.
+    pub fn set_is_complete(&self) -> bool {
+        self.passes_in_set >= self.period
+    }
+
+    /// Gives the current set's per-pixel sum and sum of squares over its
+    /// passes (of the channels' mean, one pair per pixel), as a GPU
+    /// renderer's accumulated moments tell them
+    /// ([`crate::gpu::GpuImage::grey_sums`], the difference between the
+    /// read-backs at the set's ends), in place of the images
+    /// [`BalancedRenewal::add_pass`] would have summed. A slice of the wrong
+    /// length is ignored.
+    pub fn replace_set_sums(&mut self, sums: &[(f64, f64)]) {
+        if sums.len() != self.sum.len() {
+            return;
+        }
+        for ((s, q), &(sum, squares)) in self.sum.iter_mut().zip(&mut self.squares).zip(sums) {
+            *s = sum;
+            *q = squares;
+        }
+    }
+
     /// Adds the seconds one set's build took.
     pub fn add_set_build(&mut self, secs: f64) {
         self.build_secs += secs;
@@ -244,6 +280,16 @@ impl BalancedRenewal {
     pub fn sets_outweigh_passes(&self) -> Option<bool> {
         self.estimates_after(SETS_BEFORE_KERNEL)
             .map(|e| self.outweighs(&e))
+    }
+
+    /// Why the current set's kernel holds what it holds, in words (for the
+    /// command line and the previewer's trace).
+    pub fn kernel_reason(&self) -> &'static str {
+        match self.sets_outweigh_passes() {
+            Some(true) => "kept wide: the sets' noise outweighs the passes'",
+            Some(false) => "shrunk: the passes' noise outweighs the sets'",
+            None => "as scheduled",
+        }
     }
 
     /// [`BalancedRenewal::sets_outweigh_passes`] for estimates `e` of the
@@ -455,5 +501,74 @@ mod tests {
         assert_eq!(&scaled[..4], &[64, 32, 21, 16], "{scaled:?}");
         assert!(scaled[4..].iter().all(|&k| k == 16), "{scaled:?}");
         assert_eq!(outweigh, Some(false));
+    }
+
+    /// A schedule given each set's sums at its end, as differences of
+    /// running sums ([`BalancedRenewal::replace_set_sums`]: what a GPU
+    /// renderer's read-backs give), chooses what one fed every pass's
+    /// image chooses: the same periods and kernels, the same estimates to
+    /// rounding.
+    #[test]
+    fn set_sums_from_running_moments_match_the_passes() {
+        let (a, b, c, d) = (1.0f64, 2.0f64, 0.1f64, 0.4f64);
+        let pixels = 1024;
+        let mut rng = Rng::for_sample(3, 0, 0);
+        let mut by_pass = BalancedRenewal::new(pixels, 2);
+        let mut by_sums = BalancedRenewal::new(pixels, 2);
+        by_pass.add_set_build(d);
+        by_sums.add_set_build(d);
+        let mut running = vec![(0.0f64, 0.0f64); pixels];
+        let mut at_set_start = running.clone();
+        let mut effect: Vec<f64> = (0..pixels).map(|_| b.sqrt() * normal(&mut rng)).collect();
+        let mut schedules = Vec::new();
+        for pass in 0..100 {
+            if pass > 0 {
+                if by_sums.set_is_complete() {
+                    let set: Vec<(f64, f64)> = running
+                        .iter()
+                        .zip(&at_set_start)
+                        .map(|(r, s)| (r.0 - s.0, r.1 - s.1))
+                        .collect();
+                    by_sums.replace_set_sums(&set);
+                    at_set_start.clone_from(&running);
+                }
+                let (p, q) = (by_pass.next_starts_set(), by_sums.next_starts_set());
+                assert_eq!(p, q, "pass {pass}");
+                if p {
+                    schedules.push((by_pass.period(), by_pass.kernel_neighbours()));
+                    assert_eq!(
+                        (by_sums.period(), by_sums.kernel_neighbours()),
+                        schedules[schedules.len() - 1]
+                    );
+                    for e in &mut effect {
+                        *e = b.sqrt() * normal(&mut rng);
+                    }
+                    by_pass.add_set_build(d);
+                    by_sums.add_set_build(d);
+                }
+            }
+            let image = pass_image(&effect, a, &mut rng);
+            for (r, v) in running.iter_mut().zip(&image) {
+                let x = f64::from(v.x + v.y + v.z) / 3.0;
+                *r = (r.0 + x, r.1 + x * x);
+            }
+            by_pass.add_pass(&image, c);
+            by_sums.add_pass_secs(c);
+        }
+        let (e, f) = (by_pass.estimates(), by_sums.estimates());
+        let (e, f) = (e.expect("estimates"), f.expect("estimates"));
+        assert!(
+            (e.pass_variance / f.pass_variance - 1.0).abs() < 1e-9,
+            "{e:?} {f:?}"
+        );
+        assert!(
+            (e.set_variance / f.set_variance - 1.0).abs() < 1e-9,
+            "{e:?} {f:?}"
+        );
+        assert!(schedules.len() > 10, "{schedules:?}");
+        assert!(
+            schedules.iter().skip(2).all(|&(_, k)| k == 64),
+            "{schedules:?}"
+        );
     }
 }

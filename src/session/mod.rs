@@ -4,12 +4,12 @@
 //!
 //! - [`Backend`]: where the passes run, CPU or GPU, the one choice both
 //!   `lantern render --backend` and the previewer's backend switch make.
-//! - [`renew_gpu_lights`]: the internal lights' renewal every
-//!   `resample_every` passes (method §7's averaging of the walk noise over
-//!   light sets) for a GPU renderer, written once for the command line and
-//!   the previewer (the CPU renderer renews its own sets in
-//!   [`crate::cpu::Renderer::pass`], on the same schedule,
-//!   [`crate::render::light_set`]).
+//! - [`GpuPasses`]: a GPU renderer's passes with the internal lights
+//!   renewed (method §5.5's averaging of the walk noise over light sets)
+//!   every `resample_every` passes ([`renew_gpu_lights`]) or on the
+//!   balanced schedule of [`crate::render::renewal`], written once for the
+//!   command line and the previewer (the CPU's are [`crate::cpu::Passes`],
+//!   on the same schedules).
 //! - [`worker`]: the previewer's render session, a worker thread owning
 //!   the renderers and films, jobs, cancellation, the low-resolution
 //!   first pass and the coarse light set.
@@ -17,9 +17,12 @@
 pub mod worker;
 
 use std::sync::atomic::AtomicBool;
+use std::time::Instant;
 
 use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuError, GpuRenderer};
+use crate::physics::internal::sources::InternalParams;
+use crate::render::renewal::BalancedRenewal;
 use crate::render::{internal_params_for_set, light_set_starting, PreparedScene};
 use crate::scene::{Method, RenderSettings};
 
@@ -98,15 +101,146 @@ pub fn renew_gpu_lights(
         return Ok(Renewal::Kept);
     };
     let params = internal_params_for_set(prepared, settings, set);
+    set_gpu_lights(renderer, prepared, settings, set, &params, builder)
+}
+
+/// Builds light set `set` with `params` and hands it to `renderer`.
+fn set_gpu_lights(
+    renderer: &mut GpuRenderer,
+    prepared: &PreparedScene,
+    settings: &RenderSettings,
+    set: u32,
+    params: &InternalParams,
+    builder: LightBuilder<'_>,
+) -> Result<Renewal, GpuError> {
     let lights = match builder {
-        LightBuilder::Cpu(cancel) => match prepared.build_internal_lights(&params, cancel) {
+        LightBuilder::Cpu(cancel) => match prepared.build_internal_lights(params, cancel) {
             Some(lights) => lights,
             None => return Ok(Renewal::Cancelled),
         },
-        LightBuilder::Gpu(ctx) => build_internal_lights_gpu(ctx, prepared, &params)?,
+        LightBuilder::Gpu(ctx) => build_internal_lights_gpu(ctx, prepared, params)?,
     };
     renderer.set_internal_lights(&lights, settings.internal.expert.light_samples)?;
     Ok(Renewal::Renewed(set))
+}
+
+/// A GPU renderer's passes one after another, its light sets renewed
+/// either every `resample_every` passes ([`renew_gpu_lights`]) or on a
+/// schedule balanced from the measured noise and costs
+/// ([`BalancedRenewal`]: the period, and whether a set's kernel stays wide)
+/// as [`crate::cpu::Passes`] does on the CPU. The passes accumulate on the
+/// GPU, so the balanced schedule times each pass (waiting for it) and
+/// reads the accumulated moments back once per set, at its end: the
+/// difference from the read-back at its start is the set's per-pixel sums
+/// ([`GpuImage::grey_sums`](crate::gpu::GpuImage::grey_sums)).
+pub struct GpuPasses {
+    pass: u32,
+    set: u32,
+    balanced: Option<GpuBalance>,
+}
+
+/// A balanced schedule fed from a GPU renderer's read-backs.
+struct GpuBalance {
+    schedule: BalancedRenewal,
+    /// Per pixel the running sum and sum of squares when the current set
+    /// began.
+    at_set_start: Vec<(f64, f64)>,
+}
+
+impl GpuPasses {
+    /// Passes of `renderer` (rendering with `settings`) from pass 0;
+    /// `balanced` asks for the balanced schedule, which applies to the
+    /// internal-lights method with renewed sets (`resample_every` > 0: it
+    /// is the first sets' length); `build_secs` is what set 0 took to
+    /// build.
+    pub fn new(
+        renderer: &GpuRenderer,
+        settings: &RenderSettings,
+        balanced: bool,
+        build_secs: f64,
+    ) -> Self {
+        let every = settings.internal.expert.resample_every;
+        let balanced = (balanced && settings.method == Method::Internal && every > 0).then(|| {
+            let (width, height) = renderer.size();
+            let pixels = width as usize * height as usize;
+            let mut schedule = BalancedRenewal::new(pixels, every);
+            schedule.add_set_build(build_secs);
+            GpuBalance {
+                schedule,
+                at_set_start: vec![(0.0, 0.0); pixels],
+            }
+        });
+        Self {
+            pass: 0,
+            set: 0,
+            balanced,
+        }
+    }
+
+    /// Adds the next pass to `renderer`, building the light set it starts
+    /// first (with `builder`) if it starts one; with a balanced schedule,
+    /// waits for the pass. [`Renewal::Cancelled`] (and no pass) if a CPU
+    /// build was cancelled.
+    pub fn next(
+        &mut self,
+        renderer: &mut GpuRenderer,
+        prepared: &PreparedScene,
+        settings: &RenderSettings,
+        builder: LightBuilder<'_>,
+    ) -> Result<Renewal, GpuError> {
+        let renewal = match &mut self.balanced {
+            None => renew_gpu_lights(renderer, prepared, settings, self.pass, builder)?,
+            Some(b) if self.pass > 0 && b.schedule.set_is_complete() => {
+                let t = Instant::now();
+                let running = renderer.read_back()?.grey_sums();
+                let sums: Vec<(f64, f64)> = running
+                    .iter()
+                    .zip(&b.at_set_start)
+                    .map(|(now, then)| (now.0 - then.0, now.1 - then.1))
+                    .collect();
+                b.schedule.replace_set_sums(&sums);
+                b.at_set_start = running;
+                b.schedule.next_starts_set();
+                let set = self.set + 1;
+                let params = InternalParams {
+                    kernel_neighbours: b.schedule.kernel_neighbours(),
+                    ..internal_params_for_set(prepared, settings, set)
+                };
+                let renewal = set_gpu_lights(renderer, prepared, settings, set, &params, builder)?;
+                b.schedule.add_set_build(t.elapsed().as_secs_f64());
+                renewal
+            }
+            Some(_) => Renewal::Kept,
+        };
+        match renewal {
+            Renewal::Cancelled => return Ok(renewal),
+            Renewal::Renewed(set) => self.set = set,
+            Renewal::Kept => {}
+        }
+        let t = Instant::now();
+        renderer.add_pass(self.pass);
+        if let Some(b) = &mut self.balanced {
+            renderer.finish()?;
+            b.schedule.add_pass_secs(t.elapsed().as_secs_f64());
+        }
+        self.pass += 1;
+        Ok(renewal)
+    }
+
+    /// Passes added.
+    pub fn passes(&self) -> u32 {
+        self.pass
+    }
+
+    /// The light set of the last pass (0 before any).
+    pub fn last_set(&self) -> u32 {
+        self.set
+    }
+
+    /// The balanced schedule, if the passes follow one.
+    pub fn balanced(&self) -> Option<&BalancedRenewal> {
+        self.balanced.as_ref().map(|b| &b.schedule)
+    }
 }
 
 /// How much lower (in nice steps) the render threads run than the UI.

@@ -26,6 +26,12 @@
 //! a CPU renderer. Where the GPU cannot take a job (a scene too large for
 //! the device, a device error) the worker reports it and renders that job
 //! on the CPU.
+//!
+//! The previewer refines until it is stopped, as a render with a time
+//! limit does, so on both backends its internal lights' sets follow the
+//! balanced schedule of [`crate::render::renewal`] ([`crate::cpu::Passes`],
+//! [`GpuPasses`]): how long a set lasts, and whether its kernel stays wide
+//! where the sets' noise outweighs the passes' (a thick cumulus).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -36,12 +42,13 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 
-use super::{renew_gpu_lights, Backend, LightBuilder, Renewal};
-use crate::cpu::Renderer;
+use super::{Backend, GpuPasses, LightBuilder, Renewal};
+use crate::cpu::{Passes, Renderer};
 use crate::gpu::display::{read_accum, DisplayPass, ImageStats};
 use crate::gpu::{GpuContext, GpuError, GpuRenderer};
 use crate::physics::internal::clock::Clock;
 use crate::physics::internal::sources::InternalLights;
+use crate::render::renewal::BalancedRenewal;
 use crate::render::{Film, PreparedScene};
 use crate::scene::{Density, DensitySource, Method, Scene};
 
@@ -772,13 +779,28 @@ impl JobContext<'_> {
             .collect();
         let film = || Film::new(width, height);
         let mut films: Vec<[Film; 3]> = engines.iter().map(|_| [film(), film(), film()]).collect();
+        // The previewer refines until it is stopped, as a timed render
+        // does: its light sets follow the balanced schedule.
+        let set_secs = set_build_secs(lights.as_deref());
+        let mut schedules: Vec<Passes> = engines
+            .iter()
+            .map(|(_, r)| Passes::new(r, true, set_secs))
+            .collect();
         for pass in 0..job.max_spp {
             let pass_start = Instant::now();
-            for ((estimator, engine), film) in engines.iter().zip(films.iter_mut()) {
+            for (((estimator, engine), film), passes) in engines
+                .iter()
+                .zip(films.iter_mut())
+                .zip(schedules.iter_mut())
+            {
                 let start = Instant::now();
-                let Some(image) = engine.pass(pass, self.cancel) else {
+                let set = passes.last_set();
+                let Some(image) = passes.next(engine, self.cancel) else {
                     return self.next_command();
                 };
+                if passes.last_set() != set {
+                    trace_set(passes.last_set(), passes.balanced());
+                }
                 let secs = start.elapsed().as_secs_f64();
                 self.secs_per_sample[Backend::Cpu as usize][*estimator as usize] =
                     secs / (width as f64 * height as f64).max(1.0);
@@ -833,22 +855,27 @@ impl JobContext<'_> {
         if let Some(c) = self.newer() {
             return Ok(Some(c));
         }
+        // Balanced light sets, as on the CPU.
+        let set_secs = set_build_secs(lights);
+        let mut schedules: Vec<GpuPasses> = engines
+            .iter()
+            .map(|(e, r)| GpuPasses::new(r, &settings_for(job, *e), true, set_secs))
+            .collect();
         for pass in 0..job.max_spp {
             if self.cancel.load(Ordering::Relaxed) {
                 return Ok(self.next_command());
             }
             let start = Instant::now();
-            for (e, engine) in engines.iter_mut() {
+            for ((e, engine), passes) in engines.iter_mut().zip(schedules.iter_mut()) {
                 // A fresh light set when the pass starts one (built on the
                 // CPU, as the first).
                 let settings = settings_for(job, *e);
                 let builder = LightBuilder::Cpu(self.cancel);
-                if renew_gpu_lights(engine, prepared, &settings, pass, builder)?
-                    == Renewal::Cancelled
-                {
-                    return Ok(self.next_command());
+                match passes.next(engine, prepared, &settings, builder)? {
+                    Renewal::Cancelled => return Ok(self.next_command()),
+                    Renewal::Renewed(set) => trace_set(set, passes.balanced()),
+                    Renewal::Kept => {}
                 }
-                engine.add_pass(pass);
             }
             gpu.ctx.wait_idle()?;
             trace("GPU pass", start);
@@ -865,6 +892,12 @@ impl JobContext<'_> {
         }
         Ok(self.wait_for_next())
     }
+}
+
+/// Seconds light set 0 took to build (none without lights): what a
+/// balanced schedule weighs the later sets' builds against.
+fn set_build_secs(lights: Option<&InternalLights>) -> f64 {
+    lights.map_or(0.0, |l| l.timings.total())
 }
 
 /// One GPU renderer per estimator of `job`.
@@ -969,6 +1002,26 @@ fn trace(stage: &str, since: Instant) {
             "lantern: {stage} {:.1} ms",
             since.elapsed().as_secs_f64() * 1e3
         );
+    }
+}
+
+/// Prints, when `LANTERN_TRACE` is set, that light set `set` begins, with
+/// what the balanced schedule chose for it (its length, its kernel and
+/// why).
+fn trace_set(set: u32, schedule: Option<&BalancedRenewal>) {
+    if std::env::var_os("LANTERN_TRACE").is_none() {
+        return;
+    }
+    match schedule {
+        None => eprintln!("lantern: light set {set} (fixed schedule)"),
+        Some(b) => {
+            eprintln!(
+                "lantern: light set {set}: {} passes, kernel of {} lights ({})",
+                b.period(),
+                b.kernel_neighbours(),
+                b.kernel_reason()
+            );
+        }
     }
 }
 

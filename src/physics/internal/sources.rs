@@ -272,6 +272,13 @@ pub struct BuildTimings {
     pub index: f64,
 }
 
+impl BuildTimings {
+    /// Seconds the whole build took.
+    pub fn total(&self) -> f64 {
+        self.placement + self.walks + self.index
+    }
+}
+
 /// The internal lights of one scene and parameter set.
 #[derive(Clone, Debug)]
 pub struct InternalLights {
