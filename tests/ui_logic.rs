@@ -19,6 +19,7 @@ fn stream(estimator: Method, value: Vec3, n: usize) -> StreamImage {
         single: None,
         internal: None,
         gpu: None,
+        light_sets: None,
     }
 }
 

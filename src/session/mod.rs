@@ -27,7 +27,8 @@ use crate::render::{internal_params_for_set, light_set_starting, PreparedScene};
 use crate::scene::{Method, RenderSettings};
 
 pub use worker::{
-    GpuStream, Job, LightsView, Snapshot, StreamImage, Waker, Worker, REFINE_INTERVAL,
+    GpuStream, Job, LightSetStatus, LightsView, Snapshot, StreamImage, Waker, Worker,
+    REFINE_INTERVAL,
 };
 
 /// Where the passes run.

@@ -184,6 +184,49 @@ pub struct StreamImage {
     /// On the GPU backend: the accumulation on the device (`mean` and the
     /// layers are then empty; see [`StreamImage::resolved`]).
     pub gpu: Option<GpuStream>,
+    /// Where the internal lights' renewed sets stand (none for the
+    /// reference, a preview, or lights that are not renewed).
+    pub light_sets: Option<LightSetStatus>,
+}
+
+/// Where an internal-lights stream's renewed light sets stand: which set
+/// the last pass used and what the balanced schedule chose for its
+/// kernel ([`BalancedRenewal`]), for the overlay and the export.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LightSetStatus {
+    /// The light set of the last pass (0: the first).
+    pub set: u32,
+    /// Lights the set's automatic kernel holds.
+    pub kernel_neighbours: u32,
+    /// Whether the sets' noise outweighs the passes' (the kernel then
+    /// stays wide); `None` until the schedule has measured it.
+    pub sets_outweigh_passes: Option<bool>,
+}
+
+impl LightSetStatus {
+    /// The status after a pass of light set `set` on a balanced
+    /// `schedule`; `None` without one.
+    pub fn of(set: u32, schedule: Option<&BalancedRenewal>) -> Option<Self> {
+        schedule.map(|b| LightSetStatus {
+            set,
+            kernel_neighbours: b.kernel_neighbours(),
+            sets_outweigh_passes: b.sets_outweigh_passes(),
+        })
+    }
+
+    /// In words, short: "light set 7, kernel 64 lights (kept wide: noisy
+    /// sets)".
+    pub fn label(&self) -> String {
+        let why = match self.sets_outweigh_passes {
+            Some(true) => " (kept wide: noisy sets)",
+            Some(false) => " (shrunk: quiet sets)",
+            None => "",
+        };
+        format!(
+            "light set {}, kernel {} lights{why}",
+            self.set, self.kernel_neighbours
+        )
+    }
 }
 
 /// A stream's accumulation on the GPU.
@@ -812,7 +855,10 @@ impl JobContext<'_> {
             let streams = engines
                 .iter()
                 .zip(&films)
-                .map(|((e, _), f)| stream_image(*e, f))
+                .zip(&schedules)
+                .map(|(((e, _), f), p)| {
+                    stream_image(*e, f, LightSetStatus::of(p.last_set(), p.balanced()))
+                })
                 .collect();
             self.publish(streams, extra(pass + 1 == job.max_spp, None));
             if let Some(c) = self.newer() {
@@ -884,7 +930,11 @@ impl JobContext<'_> {
                 self.secs_per_sample[Backend::Gpu as usize][*e as usize] =
                     secs / (width as f64 * height as f64).max(1.0);
             }
-            let (streams, error_stats) = gpu_streams(gpu, &engines)?;
+            let light_sets: Vec<Option<LightSetStatus>> = schedules
+                .iter()
+                .map(|p| LightSetStatus::of(p.last_set(), p.balanced()))
+                .collect();
+            let (streams, error_stats) = gpu_streams(gpu, &engines, &light_sets)?;
             self.publish(streams, extra(pass + 1 == job.max_spp, error_stats));
             if let Some(c) = self.newer() {
                 return Ok(Some(c));
@@ -940,14 +990,19 @@ type GpuStreams = (Vec<StreamImage>, Option<(f32, f32)>);
 /// noise figures (and, with both estimators, the RMSE of internal lights
 /// against the reference and the reference's mean) from the statistics
 /// pass.
-fn gpu_streams(gpu: &GpuWorker, engines: &[(Method, GpuRenderer)]) -> Result<GpuStreams, GpuError> {
+/// `light_sets` holds each engine's light-set status (missing: none).
+fn gpu_streams(
+    gpu: &GpuWorker,
+    engines: &[(Method, GpuRenderer)],
+    light_sets: &[Option<LightSetStatus>],
+) -> Result<GpuStreams, GpuError> {
     let reference = engines
         .iter()
         .find(|(e, _)| *e == Method::Reference)
         .map(|(_, r)| r.accum_buffer());
     let mut error_stats = None;
     let mut streams = Vec::new();
-    for (estimator, engine) in engines {
+    for (i, (estimator, engine)) in engines.iter().enumerate() {
         let (width, height) = engine.size();
         let other = match estimator {
             Method::Internal => reference,
@@ -976,6 +1031,7 @@ fn gpu_streams(gpu: &GpuWorker, engines: &[(Method, GpuRenderer)]) -> Result<Gpu
                 ctx: gpu.ctx.clone(),
                 accum: engine.accum_buffer().clone(),
             }),
+            light_sets: light_sets.get(i).copied().flatten(),
         });
     }
     Ok((streams, error_stats))
@@ -1065,7 +1121,7 @@ impl JobContext<'_> {
                 engine.add_pass(0);
             }
             gpu.ctx.wait_idle()?;
-            gpu_streams(gpu, &engines).map(|(streams, _)| streams)
+            gpu_streams(gpu, &engines, &[]).map(|(streams, _)| streams)
         });
         let streams = match gpu_streams {
             Some(Ok(mut streams)) => {
@@ -1099,6 +1155,7 @@ impl JobContext<'_> {
                         single: None,
                         internal: None,
                         gpu: None,
+                        light_sets: None,
                     });
                 }
                 streams
@@ -1136,7 +1193,11 @@ struct SnapshotExtra {
     error_stats: Option<(f32, f32)>,
 }
 
-fn stream_image(estimator: Method, films: &[Film; 3]) -> StreamImage {
+fn stream_image(
+    estimator: Method,
+    films: &[Film; 3],
+    light_sets: Option<LightSetStatus>,
+) -> StreamImage {
     let film = &films[0];
     let mean = film.mean();
     let variance = film.variance_of_mean();
@@ -1159,12 +1220,47 @@ fn stream_image(estimator: Method, films: &[Film; 3]) -> StreamImage {
         single: Some(films[1].mean()),
         internal: Some(films[2].mean()),
         gpu: None,
+        light_sets,
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The overlay's light-set status: none without a balanced schedule;
+    /// a fresh schedule's first set holds 64 lights, undecided; the
+    /// decision reads in words.
+    #[test]
+    fn light_set_status_says_what_the_schedule_chose() {
+        assert_eq!(LightSetStatus::of(3, None), None);
+        let mut schedule = BalancedRenewal::new(4, 2);
+        schedule.add_set_build(0.1);
+        let first = LightSetStatus::of(0, Some(&schedule)).expect("balanced");
+        assert_eq!(
+            (first.kernel_neighbours, first.sets_outweigh_passes),
+            (64, None)
+        );
+        assert_eq!(first.label(), "light set 0, kernel 64 lights");
+        let wide = LightSetStatus {
+            set: 7,
+            kernel_neighbours: 64,
+            sets_outweigh_passes: Some(true),
+        };
+        assert_eq!(
+            wide.label(),
+            "light set 7, kernel 64 lights (kept wide: noisy sets)"
+        );
+        let shrunk = LightSetStatus {
+            sets_outweigh_passes: Some(false),
+            kernel_neighbours: 16,
+            ..wide
+        };
+        assert_eq!(
+            shrunk.label(),
+            "light set 7, kernel 16 lights (shrunk: quiet sets)"
+        );
+    }
 
     fn job(eye: Vec3, view_walks: u32) -> Job {
         let mut scene = Scene::default();

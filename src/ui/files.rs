@@ -313,6 +313,9 @@ pub fn export(
                     Method::Reference => "reference".into(),
                 },
             ));
+            if let Some(sets) = stream.light_sets {
+                meta.push(("light_sets".into(), sets.label()));
+            }
             let mut layers: Vec<(&str, &[Vec3])> = Vec::new();
             if session.export_layers {
                 if let Some(single) = &stream.single {

@@ -942,6 +942,9 @@ fn overlay_ui(painter: &egui::Painter, app: &ViewportState<'_>, rect: Rect) {
     } else {
         format!("{spp} spp   noise {:.1} %", noise * 100.0)
     };
+    if let Some(sets) = snapshot.streams.iter().find_map(|s| s.light_sets) {
+        text.push_str(&format!("   {}", sets.label()));
+    }
     if snapshot.done {
         text.push_str("   done");
     }
