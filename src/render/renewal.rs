@@ -140,6 +140,9 @@ pub struct BalancedRenewal {
     /// sets, the sum of [`KERNEL_NEIGHBOURS`] over their kernels.
     kernel: u32,
     kernel_factors: f64,
+    /// [`BalancedRenewal::sets_outweigh_passes`] as decided for the
+    /// current set.
+    outweigh: Option<bool>,
 }
 
 impl BalancedRenewal {
@@ -164,6 +167,7 @@ impl BalancedRenewal {
             builds: 0,
             kernel: kernel_neighbours_for_set(0),
             kernel_factors: 0.0,
+            outweigh: None,
         }
     }
 
@@ -243,7 +247,8 @@ impl BalancedRenewal {
         if let Some(e) = estimates.filter(|_| self.sets >= SETS_BEFORE_BALANCING) {
             self.period = e.best_period();
         }
-        self.kernel = match estimates.map(|e| self.outweighs(&e)) {
+        self.outweigh = estimates.map(|e| self.outweighs(&e));
+        self.kernel = match self.outweigh {
             Some(true) => KERNEL_NEIGHBOURS,
             _ => kernel_neighbours_for_set(self.sets),
         };
@@ -275,15 +280,16 @@ impl BalancedRenewal {
     /// at the balanced period, `b d ≥ a c` (`b P* ≥ a` at `P* = √(ad/(bc))`:
     /// the set variance `b/n` of the mean of `n` sets against the passes'
     /// `a/(n P*)`), with `b` scaled to the first set's kernel (`b` grows as
-    /// `1/k`: the sets measured may have had narrower ones). `None` before
-    /// the estimates ([`BalancedRenewal::estimates`]).
+    /// `1/k`: the sets measured may have had narrower ones), as decided
+    /// when the current set began, from the sets complete then (what its
+    /// kernel follows; kept, so that asking costs nothing). `None` while
+    /// fewer than two sets were complete.
     pub fn sets_outweigh_passes(&self) -> Option<bool> {
-        self.estimates_after(SETS_BEFORE_KERNEL)
-            .map(|e| self.outweighs(&e))
+        self.outweigh
     }
 
     /// Why the current set's kernel holds what it holds, in words (for the
-    /// command line and the previewer's trace).
+    /// command line's summary).
     pub fn kernel_reason(&self) -> &'static str {
         match self.sets_outweigh_passes() {
             Some(true) => "kept wide: the sets' noise outweighs the passes'",

@@ -1062,22 +1062,17 @@ fn trace(stage: &str, since: Instant) {
 }
 
 /// Prints, when `LANTERN_TRACE` is set, that light set `set` begins, with
-/// what the balanced schedule chose for it (its length, its kernel and
-/// why).
+/// what the balanced schedule chose for it (its kernel and why, its
+/// length).
 fn trace_set(set: u32, schedule: Option<&BalancedRenewal>) {
     if std::env::var_os("LANTERN_TRACE").is_none() {
         return;
     }
-    match schedule {
-        None => eprintln!("lantern: light set {set} (fixed schedule)"),
-        Some(b) => {
-            eprintln!(
-                "lantern: light set {set}: {} passes, kernel of {} lights ({})",
-                b.period(),
-                b.kernel_neighbours(),
-                b.kernel_reason()
-            );
+    match (LightSetStatus::of(set, schedule), schedule) {
+        (Some(status), Some(b)) => {
+            eprintln!("lantern: {}, {} passes", status.label(), b.period())
         }
+        _ => eprintln!("lantern: light set {set} (fixed schedule)"),
     }
 }
 
