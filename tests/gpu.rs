@@ -1697,3 +1697,86 @@ fn balanced_gpu_passes_keep_the_kernel_wide_where_the_sets_are_noisy() {
         );
     }
 }
+
+/// `lantern equal-time --backend gpu`: both methods render on the GPU and
+/// are read back at each snapshot time. A thin sphere at 16² against a
+/// CPU-converged image: each method is measured at both times with more
+/// passes at the later one, the reference's error falls, both images'
+/// means are near the converged one (a read-back of the wrong buffer or
+/// an unnormalised sum would be far off), and the report names the GPU.
+#[test]
+fn equal_time_on_the_gpu_measures_both_methods_at_each_time() {
+    use lantern::cli::args::InternalArgs;
+    use lantern::cli::equal_time::{run, EqualTimeArgs};
+    use lantern::session::Backend;
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::root().join("assets/scenes/thin_sphere.ron");
+    let prepared = Arc::new(common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
+        s.camera.width = 16;
+        s.camera.height = 16;
+    }));
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Reference;
+    settings.seed = 99;
+    settings.spp = 4096;
+    let film = lantern::cpu::render(prepared.clone(), &settings, |_| true);
+    let meta = vec![("lantern/seed".to_owned(), "99".to_owned())];
+    let conv = dir.path().join("thin_sphere.exr");
+    lantern::render::export::write_exr_with_metadata(&conv, 16, 16, &film.mean(), &meta).unwrap();
+    lantern::render::export::write_exr(
+        &dir.path().join("thin_sphere_var.exr"),
+        16,
+        16,
+        &film.variance_of_mean(),
+    )
+    .unwrap();
+    let args = EqualTimeArgs {
+        scenes: vec![scene],
+        converged_dir: dir.path().to_owned(),
+        // The first snapshot at the first pass; the second well past the
+        // build, which counts (its pipelines take seconds on lavapipe).
+        times: vec![0.01, 8.0],
+        size: 16,
+        threads: Some(1),
+        backend: Backend::Gpu,
+        seed: 5,
+        out: dir.path().join("out"),
+        fixed_renewal: false,
+        internal: InternalArgs {
+            lights: Some(256),
+            walks: Some(8),
+            ..Default::default()
+        },
+    };
+    run(&args).unwrap();
+    let csv = std::fs::read_to_string(dir.path().join("out/report.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    for method in ["reference", "internal"] {
+        let r: Vec<&Vec<&str>> = rows.iter().filter(|r| r[1] == method).collect();
+        assert_eq!(r.len(), 2, "{csv}");
+        let secs = |k: usize| -> f64 { r[k][3].parse().unwrap() };
+        let spp = |k: usize| -> u32 { r[k][4].parse().unwrap() };
+        assert!(secs(0) >= 0.01 && secs(1) >= 8.0, "{csv}");
+        assert!(spp(1) > spp(0), "{csv}");
+        for row in &r {
+            for c in 5..8 {
+                let e: f64 = row[c].parse().unwrap();
+                assert!(e.abs() < 0.1, "{method}: mean error {e} in {csv}");
+            }
+        }
+        if method == "reference" {
+            let pixel = |k: usize| -> f64 { r[k][9].parse().unwrap() };
+            assert!(pixel(1) < pixel(0), "{csv}");
+        }
+    }
+    let md = std::fs::read_to_string(dir.path().join("out/report.md")).unwrap();
+    assert!(md.contains("16×16, GPU ("), "{md}");
+}

@@ -37,13 +37,15 @@ use anyhow::{bail, Context, Result};
 use glam::Vec3;
 
 use super::args::InternalArgs;
-use super::support::{load_square, renewal_text, variance_path};
+use super::support::{gpu_context, gpu_renderer, load_square, renewal_text, variance_path};
 use crate::cpu::{Passes, Renderer};
+use crate::gpu::GpuContext;
 use crate::render::export::{read_exr, read_exr_metadata, RgbImage};
 use crate::render::film::image_mean;
 use crate::render::stats::{block_rmse_against, compare, rmse_against, BLOCK};
 use crate::render::{Film, PreparedScene};
 use crate::scene::{Method, RenderSettings};
+use crate::session::{Backend, GpuPasses, LightBuilder};
 
 /// Options of `lantern equal-time`.
 #[derive(Clone, Debug, clap::Args)]
@@ -65,6 +67,11 @@ pub struct EqualTimeArgs {
     /// Worker threads for the renders (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Which backend renders both methods (gpu: the internal lights are
+    /// placed and walked on the GPU too, each snapshot is read back from
+    /// the GPU's accumulation; the read-backs are not counted as time).
+    #[arg(long, value_enum, default_value_t = Backend::Cpu)]
+    pub backend: Backend,
     /// Seed of the internal-lights render (the reference renders with
     /// seed + 1); both must differ from the converged image's.
     #[arg(long, default_value_t = 0)]
@@ -181,6 +188,70 @@ fn snapshots(
     Ok(out)
 }
 
+/// [`snapshots`] on the GPU: the same schedule of light sets (fixed or
+/// balanced, [`GpuPasses`]), the passes accumulated on the device and read
+/// back at each of `times`; the time counted is the build (pipelines
+/// included) and the passes, not the read-backs.
+#[allow(clippy::too_many_arguments)]
+fn gpu_snapshots(
+    ctx: &GpuContext,
+    prepared: &PreparedScene,
+    settings: &RenderSettings,
+    times: &[f64],
+    converged: &[Vec3],
+    converged_var: &[Vec3],
+    label: &str,
+    balanced: bool,
+) -> Result<Vec<Snapshot>> {
+    let start = Instant::now();
+    let (mut renderer, timings) = gpu_renderer(ctx, prepared, settings)?;
+    renderer.finish()?;
+    let mut elapsed = start.elapsed();
+    let set_secs = timings.map_or(elapsed.as_secs_f64(), |t| t.total());
+    let mut passes = GpuPasses::new(&renderer, settings, balanced, set_secs);
+    let cam = prepared.camera;
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let mut out = Vec::new();
+    for &target in times {
+        let due = Duration::from_secs_f64(target);
+        while passes.passes() == 0 || elapsed < due {
+            let start = Instant::now();
+            passes.next(&mut renderer, prepared, settings, LightBuilder::Gpu(ctx))?;
+            renderer.finish()?;
+            elapsed += start.elapsed();
+        }
+        if let Some(b) = passes.balanced() {
+            eprintln!(
+                "{label}: light set {} of {} passes (balanced)",
+                passes.last_set(),
+                b.period()
+            );
+        }
+        let image = renderer.read_back()?;
+        if image.cut_short_passes() > 0 {
+            eprintln!(
+                "{label}: warning: {} pass(es) cut short on the GPU (a bounded loop ran out)",
+                image.cut_short_passes()
+            );
+        }
+        let film = image.film();
+        let errors = errors(&film.mean(), converged, converged_var, w, h);
+        let spp = passes.passes();
+        eprintln!(
+            "{label}: {target} s: {spp} spp in {:.2} s (GPU), pixel RMSE {:.2} %",
+            elapsed.as_secs_f64(),
+            100.0 * errors.pixel
+        );
+        out.push(Snapshot {
+            target,
+            secs: elapsed.as_secs_f64(),
+            spp,
+            errors,
+        });
+    }
+    Ok(out)
+}
+
 /// A converged reference and what its header says about it.
 struct Converged {
     image: RgbImage,
@@ -283,8 +354,12 @@ pub fn run(args: &EqualTimeArgs) -> Result<()> {
     let mut csv = String::from(
         "scene,method,target_s,secs,spp,mean_err_r,mean_err_g,mean_err_b,block_rmse,pixel_rmse\n",
     );
+    let ctx = match args.backend {
+        Backend::Cpu => None,
+        Backend::Gpu => Some(gpu_context()?),
+    };
     for scene in &args.scenes {
-        let (section, rows) = pool.install(|| scene_report(args, scene, &times))?;
+        let (section, rows) = pool.install(|| scene_report(args, ctx.as_ref(), scene, &times))?;
         print!("{section}");
         report.push_str(&section);
         csv.push_str(&rows);
@@ -298,7 +373,12 @@ pub fn run(args: &EqualTimeArgs) -> Result<()> {
 }
 
 /// One scene's Markdown section and CSV rows.
-fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(String, String)> {
+fn scene_report(
+    args: &EqualTimeArgs,
+    ctx: Option<&GpuContext>,
+    scene: &Path,
+    times: &[f64],
+) -> Result<(String, String)> {
     let prepared = Arc::new(load_square(scene, args.size)?);
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let stem = scene
@@ -327,25 +407,14 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
     let v = &converged.var;
     // The internal lights first: their passes are long, and the reference
     // is then measured at the wall time each of their snapshots took.
-    let internal_snapshots = snapshots(
-        &prepared,
-        &internal,
-        times,
-        c,
-        v,
-        &format!("{stem} internal"),
-        !args.fixed_renewal,
-    )?;
+    let balanced = !args.fixed_renewal;
+    let measure = |settings: &RenderSettings, times: &[f64], label: String| match ctx {
+        None => snapshots(&prepared, settings, times, c, v, &label, balanced),
+        Some(ctx) => gpu_snapshots(ctx, &prepared, settings, times, c, v, &label, balanced),
+    };
+    let internal_snapshots = measure(&internal, times, format!("{stem} internal"))?;
     let spent: Vec<f64> = internal_snapshots.iter().map(|s| s.secs).collect();
-    let mut reference_snapshots = snapshots(
-        &prepared,
-        &reference,
-        &spent,
-        c,
-        v,
-        &format!("{stem} reference"),
-        !args.fixed_renewal,
-    )?;
+    let mut reference_snapshots = measure(&reference, &spent, format!("{stem} reference"))?;
     for (r, &t) in reference_snapshots.iter_mut().zip(times) {
         r.target = t;
     }
@@ -356,11 +425,14 @@ fn scene_report(args: &EqualTimeArgs, scene: &Path, times: &[f64]) -> Result<(St
 
     let (pixel_noise, block_noise, mean_se) = own_noise(&converged);
     let i = &internal.internal;
-    let threads = rayon::current_num_threads();
+    let renderers = match ctx {
+        None => format!("{} thread(s)", rayon::current_num_threads()),
+        Some(ctx) => format!("GPU ({})", ctx.describe()),
+    };
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "\n### {stem} {w}×{h}, {threads} thread(s): equal time against the converged reference\n"
+        "\n### {stem} {w}×{h}, {renderers}: equal time against the converged reference\n"
     );
     let _ = writeln!(
         md,
@@ -475,6 +547,9 @@ mod tests {
         let scene = root.join("assets/scenes/thin_sphere.ron");
         let prepared = Arc::new(load_square(&scene, 16).unwrap());
         let mut settings = prepared.scene.render.clone();
+        // The converged image is the reference method's (the scene opens on
+        // the internal lights).
+        settings.method = Method::Reference;
         settings.seed = 99;
         settings.spp = 4096;
         let film = crate::cpu::render(prepared.clone(), &settings, |_| true);
@@ -489,6 +564,7 @@ mod tests {
             times: vec![0.4, 0.1],
             size: 16,
             threads: Some(1),
+            backend: Backend::Cpu,
             seed: 5,
             out: dir.path().join("out"),
             fixed_renewal: false,
