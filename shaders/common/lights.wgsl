@@ -39,7 +39,21 @@ fn light_at(i: u32, p: vec3<f32>) -> LightSample {
     // A far light (`point_sample`): `|v|²` would overflow.
     let u = v / s;
     let lu = length(u);
-    return LightSample(u / lu, min(s * lu, BIG), l.power / s / lu / s / lu);
+    let d = s * lu;
+    return LightSample(u / lu, min(d, BIG), far_irradiance(l.power, d));
+}
+
+// `power / d²` for a distance `d` whose square overflows, without forming
+// any quantity out of range: with `d = m·2^e` (`m` in [0.5, 1)), it is
+// `((power·2^-e) / m²)·2^-e`, and `ldexp` is exact. The CPU's
+// `power / s / lu / s / lu` is not safe here: a hardware driver may turn
+// the divisions into multiplications by reciprocals and regroup them, and
+// `(1/d)²` (10⁻³⁹ for a light at 3·10¹⁹) is subnormal, which the GPU
+// flushes to zero: the H200's Vulkan driver lit nothing from such a light.
+fn far_irradiance(power: vec3<f32>, d: f32) -> vec3<f32> {
+    let f = frexp(d);
+    let e = vec3<i32>(-f.exp);
+    return ldexp(ldexp(power, e) / (f.fract * f.fract), e);
 }
 
 // The environment (src/physics/environment.rs): radiance, sampling and pdf
