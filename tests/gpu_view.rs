@@ -295,7 +295,8 @@ fn worker_agrees(
     cpu_spp: u32,
     seeds: (u64, u64),
 ) {
-    let Some(ctx) = common::gpu() else { return };
+    let Some(gpu) = common::gpu() else { return };
+    let (ctx, _turn) = gpu.into_parts();
     let mut gpu_worker = Worker::start_with_gpu(Box::new(|_| {}), Some(ctx));
     let t = Instant::now();
     let (gpu_snap, errors) = render_with(
@@ -392,9 +393,8 @@ fn gpu_worker_agrees_with_cpu_worker_internal_lights() {
 /// (48 kB): the worker must say so and render on the CPU.
 #[test]
 fn a_scene_too_large_for_the_device_falls_back_to_the_cpu_with_a_notice() {
-    if common::gpu().is_none() {
-        return;
-    }
+    // Held while the test makes its own small device.
+    let Some(_gpu) = common::gpu() else { return };
     let small = pollster::block_on(async {
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
