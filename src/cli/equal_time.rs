@@ -42,6 +42,7 @@ use crate::cpu::{Passes, Renderer};
 use crate::gpu::GpuContext;
 use crate::render::export::{read_exr, read_exr_metadata, RgbImage};
 use crate::render::film::image_mean;
+use crate::render::renewal::BalancedRenewal;
 use crate::render::stats::{block_rmse_against, compare, rmse_against, BLOCK};
 use crate::render::{Film, PreparedScene};
 use crate::scene::{Method, RenderSettings};
@@ -165,13 +166,7 @@ fn snapshots(
             elapsed += start.elapsed();
             pass += 1;
         }
-        if let Some(b) = passes.balanced() {
-            eprintln!(
-                "{label}: light set {} of {} passes (balanced)",
-                passes.last_set(),
-                b.period()
-            );
-        }
+        report_set(label, passes.last_set(), passes.balanced());
         let errors = errors(&film.mean(), converged, converged_var, w, h);
         eprintln!(
             "{label}: {target} s: {pass} spp in {:.2} s, pixel RMSE {:.2} %",
@@ -186,6 +181,17 @@ fn snapshots(
         });
     }
     Ok(out)
+}
+
+/// Prints which light set a snapshot ended on and the balanced period,
+/// where the passes follow a balanced schedule.
+fn report_set(label: &str, set: u32, balanced: Option<&BalancedRenewal>) {
+    if let Some(b) = balanced {
+        eprintln!(
+            "{label}: light set {set} of {} passes (balanced)",
+            b.period()
+        );
+    }
 }
 
 /// [`snapshots`] on the GPU: the same schedule of light sets (fixed or
@@ -220,13 +226,7 @@ fn gpu_snapshots(
             renderer.finish()?;
             elapsed += start.elapsed();
         }
-        if let Some(b) = passes.balanced() {
-            eprintln!(
-                "{label}: light set {} of {} passes (balanced)",
-                passes.last_set(),
-                b.period()
-            );
-        }
+        report_set(label, passes.last_set(), passes.balanced());
         let image = renderer.read_back()?;
         if image.cut_short_passes() > 0 {
             eprintln!(
