@@ -131,6 +131,8 @@ pub struct BalancedRenewal {
     set_mean_squares: Vec<f64>,
     sets: u32,
     inverse_lengths: f64,
+    /// `Σ n_s²` over the complete sets.
+    square_lengths: f64,
     /// Time spent in passes and in builds, and their counts.
     pass_secs: f64,
     passes: u32,
@@ -161,6 +163,7 @@ impl BalancedRenewal {
             set_mean_squares: vec![0.0; pixels],
             sets: 0,
             inverse_lengths: 0.0,
+            square_lengths: 0.0,
             pass_secs: 0.0,
             passes: 0,
             build_secs: 0.0,
@@ -323,9 +326,35 @@ impl BalancedRenewal {
         self.sets += 1;
         self.kernel_factors += f64::from(KERNEL_NEIGHBOURS) / f64::from(self.kernel.max(1));
         self.inverse_lengths += 1.0 / n;
+        self.square_lengths += n * n;
         self.sum.fill(0.0);
         self.squares.fill(0.0);
         self.passes_in_set = 0;
+    }
+
+    /// How much the image's noise exceeds what its passes' spread says:
+    /// the factor on the variance of a pixel's mean over all passes so far.
+    ///
+    /// A pixel's passes spread by their own noise `a` and, across sets, by
+    /// the sets' `b`; passes of one set share its lights. After `n` passes
+    /// in sets of `n_s`, the mean's variance is `a/n + b Σn_s²/n²`, but
+    /// the spread of all the passes, `s²`, is on average
+    /// `a + b (n − Σn_s²/n)/(n − 1)` (one-way analysis of variance), and
+    /// `s²/n` is what a noise figure from the passes reads. The ratio is 1
+    /// for a fresh set every pass and `1 + b n/a` for one set throughout.
+    /// `None` until two sets are complete (with `b` clamped at 0).
+    pub fn noise_inflation(&self) -> Option<f64> {
+        let e = self.estimates_after(SETS_BEFORE_KERNEL)?;
+        let n = f64::from(self.passes);
+        if n < 2.0 {
+            return None;
+        }
+        let (a, b) = (e.pass_variance, e.set_variance.max(0.0));
+        let current = f64::from(self.passes_in_set);
+        let squares = self.square_lengths + current * current;
+        let truth = a + b * squares / n;
+        let spread = a + b * (n - squares / n) / (n - 1.0);
+        (spread > 0.0 && truth.is_finite()).then(|| (truth / spread).max(1.0))
     }
 
     /// The estimates once three sets are complete, at least one with two
@@ -423,6 +452,79 @@ mod tests {
                 .all(|&p| (7..=9).contains(&p)),
             "{periods:?}"
         );
+    }
+
+    /// The noise of the image's mean against what its passes' spread
+    /// says, on passes made as in
+    /// [`recovers_the_variance_components_and_the_best_period`] (sets of
+    /// about 8 passes): the passes' spread reads about 0.7 of the mean
+    /// squared error over the pixels, the spread times
+    /// [`BalancedRenewal::noise_inflation`] the error itself (within 10 %);
+    /// with a fresh set every pass the factor is 1.
+    #[test]
+    fn noise_inflation_accounts_for_the_sets() {
+        let (a, b, c, d) = (4.0f64, 0.25f64, 0.1f64, 0.4f64);
+        let pixels = 4096;
+        let mut rng = Rng::for_sample(9, 0, 0);
+        let mut renewal = BalancedRenewal::new(pixels, 2);
+        renewal.add_set_build(d);
+        let mut effect: Vec<f64> = (0..pixels).map(|_| b.sqrt() * normal(&mut rng)).collect();
+        let (mut sum, mut squares) = (vec![0.0f64; pixels], vec![0.0f64; pixels]);
+        let passes = 200;
+        for pass in 0..passes {
+            if pass > 0 && renewal.next_starts_set() {
+                for e in &mut effect {
+                    *e = b.sqrt() * normal(&mut rng);
+                }
+                renewal.add_set_build(d);
+            }
+            let image = pass_image(&effect, a, &mut rng);
+            for ((s, q), v) in sum.iter_mut().zip(&mut squares).zip(&image) {
+                let x = f64::from(v.x);
+                *s += x;
+                *q += x * x;
+            }
+            renewal.add_pass(&image, c);
+        }
+        let n = f64::from(passes);
+        // The truth is 1 in every pixel.
+        let error: f64 = sum.iter().map(|s| (s / n - 1.0).powi(2)).sum::<f64>() / pixels as f64;
+        let spread: f64 = sum
+            .iter()
+            .zip(&squares)
+            .map(|(s, q)| (q - s * s / n) / (n - 1.0) / n)
+            .sum::<f64>()
+            / pixels as f64;
+        let inflation = renewal.noise_inflation().expect("two sets complete");
+        println!(
+            "spread / error {:.3}, inflation {inflation:.3}",
+            spread / error
+        );
+        assert!(spread / error < 0.8, "{spread} {error}");
+        assert!(
+            (spread * inflation / error - 1.0).abs() < 0.1,
+            "{spread} × {inflation} against {error}"
+        );
+
+        // Free sets: after the first three (two passes each, the least a
+        // schedule starts with) a fresh set every pass.
+        let pixels = 1024;
+        let mut every_pass = BalancedRenewal::new(pixels, 2);
+        every_pass.add_set_build(0.0);
+        let mut effect: Vec<f64> = (0..pixels).map(|_| b.sqrt() * normal(&mut rng)).collect();
+        for pass in 0..60 {
+            if pass > 0 && every_pass.next_starts_set() {
+                for e in &mut effect {
+                    *e = b.sqrt() * normal(&mut rng);
+                }
+                every_pass.add_set_build(0.0);
+            }
+            every_pass.add_pass(&pass_image(&effect, a, &mut rng), c);
+        }
+        assert_eq!(every_pass.period(), 1);
+        // Σn_s² = 3·4 + 54 against n = 60: a factor of about 1.003.
+        let f = every_pass.noise_inflation().expect("sets complete");
+        assert!((1.0..1.02).contains(&f), "{f}");
     }
 
     /// Without set noise the sets grow to the longest period the costs

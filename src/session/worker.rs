@@ -192,7 +192,7 @@ pub struct StreamImage {
 /// Where an internal-lights stream's renewed light sets stand: which set
 /// the last pass used and what the balanced schedule chose for its
 /// kernel ([`BalancedRenewal`]), for the overlay and the export.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LightSetStatus {
     /// The light set of the last pass (0: the first).
     pub set: u32,
@@ -201,6 +201,10 @@ pub struct LightSetStatus {
     /// Whether the sets' noise outweighs the passes' (the kernel then
     /// stays wide); `None` until the schedule has measured it.
     pub sets_outweigh_passes: Option<bool>,
+    /// The factor on a noise figure read from the passes' spread for the
+    /// noise the passes of one set share (the square root of
+    /// [`BalancedRenewal::noise_inflation`]); `None` until measured.
+    pub noise_scale: Option<f32>,
 }
 
 impl LightSetStatus {
@@ -211,6 +215,7 @@ impl LightSetStatus {
             set,
             kernel_neighbours: b.kernel_neighbours(),
             sets_outweigh_passes: b.sets_outweigh_passes(),
+            noise_scale: b.noise_inflation().map(|f| f.sqrt() as f32),
         })
     }
 
@@ -1233,14 +1238,19 @@ mod tests {
         schedule.add_set_build(0.1);
         let first = LightSetStatus::of(0, Some(&schedule)).expect("balanced");
         assert_eq!(
-            (first.kernel_neighbours, first.sets_outweigh_passes),
-            (64, None)
+            (
+                first.kernel_neighbours,
+                first.sets_outweigh_passes,
+                first.noise_scale
+            ),
+            (64, None, None)
         );
         assert_eq!(first.label(), "light set 0, kernel 64 lights");
         let wide = LightSetStatus {
             set: 7,
             kernel_neighbours: 64,
             sets_outweigh_passes: Some(true),
+            noise_scale: Some(1.4),
         };
         assert_eq!(
             wide.label(),

@@ -932,10 +932,12 @@ fn overlay_ui(painter: &egui::Painter, app: &ViewportState<'_>, rect: Rect) {
         return;
     };
     let spp = app.display.spp();
+    // The passes' spread, scaled where the light sets' shared noise is
+    // measured (`LightSetStatus::noise_scale`).
     let noise = snapshot
         .streams
         .iter()
-        .map(|s| s.rel_error)
+        .map(|s| s.rel_error * s.light_sets.and_then(|l| l.noise_scale).unwrap_or(1.0))
         .fold(0.0f32, f32::max);
     let mut text = if spp == 0 {
         "preview".to_string()
