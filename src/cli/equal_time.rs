@@ -37,7 +37,9 @@ use anyhow::{bail, Context, Result};
 use glam::Vec3;
 
 use super::args::InternalArgs;
-use super::support::{gpu_context, gpu_renderer, load_square, renewal_text, variance_path};
+use super::support::{
+    gpu_context, gpu_renderer, load_square, renewal_text, variance_path, warn_cut_short,
+};
 use crate::cpu::{Passes, Renderer};
 use crate::gpu::GpuContext;
 use crate::render::export::{read_exr, read_exr_metadata, RgbImage};
@@ -133,14 +135,49 @@ pub struct Snapshot {
     pub errors: Errors,
 }
 
+/// The converged image that snapshots are measured against.
+struct Truth<'a> {
+    image: &'a [Vec3],
+    var: &'a [Vec3],
+    width: usize,
+    height: usize,
+}
+
+impl Truth<'_> {
+    /// Measures `image` (the mean of `spp` passes after `elapsed`, asked
+    /// for at `target` seconds) and says so under `label`; `on` names the
+    /// backend where it is not the CPU.
+    fn snapshot(
+        &self,
+        label: &str,
+        target: f64,
+        spp: u32,
+        elapsed: Duration,
+        image: &[Vec3],
+        on: &str,
+    ) -> Snapshot {
+        let errors = errors(image, self.image, self.var, self.width, self.height);
+        eprintln!(
+            "{label}: {target} s: {spp} spp in {:.2} s{on}, pixel RMSE {:.2} %",
+            elapsed.as_secs_f64(),
+            100.0 * errors.pixel
+        );
+        Snapshot {
+            target,
+            secs: elapsed.as_secs_f64(),
+            spp,
+            errors,
+        }
+    }
+}
+
 /// Renders progressively with `settings` and measures the image at each of
 /// `times` (ascending), as the module says.
 fn snapshots(
     prepared: &Arc<PreparedScene>,
     settings: &RenderSettings,
     times: &[f64],
-    converged: &[Vec3],
-    converged_var: &[Vec3],
+    truth: &Truth<'_>,
     label: &str,
     balanced: bool,
 ) -> Result<Vec<Snapshot>> {
@@ -151,7 +188,6 @@ fn snapshots(
     let mut elapsed = start.elapsed();
     let mut passes = Passes::new(&renderer, balanced, elapsed.as_secs_f64());
     let cam = prepared.camera;
-    let (w, h) = (cam.width as usize, cam.height as usize);
     let mut film = Film::new(cam.width, cam.height);
     let mut out = Vec::new();
     let mut pass = 0;
@@ -167,18 +203,7 @@ fn snapshots(
             pass += 1;
         }
         report_set(label, passes.last_set(), passes.balanced());
-        let errors = errors(&film.mean(), converged, converged_var, w, h);
-        eprintln!(
-            "{label}: {target} s: {pass} spp in {:.2} s, pixel RMSE {:.2} %",
-            elapsed.as_secs_f64(),
-            100.0 * errors.pixel
-        );
-        out.push(Snapshot {
-            target,
-            secs: elapsed.as_secs_f64(),
-            spp: pass,
-            errors,
-        });
+        out.push(truth.snapshot(label, target, pass, elapsed, &film.mean(), ""));
     }
     Ok(out)
 }
@@ -198,14 +223,12 @@ fn report_set(label: &str, set: u32, balanced: Option<&BalancedRenewal>) {
 /// balanced, [`GpuPasses`]), the passes accumulated on the device and read
 /// back at each of `times`; the time counted is the build (pipelines
 /// included) and the passes, not the read-backs.
-#[allow(clippy::too_many_arguments)]
 fn gpu_snapshots(
     ctx: &GpuContext,
     prepared: &PreparedScene,
     settings: &RenderSettings,
     times: &[f64],
-    converged: &[Vec3],
-    converged_var: &[Vec3],
+    truth: &Truth<'_>,
     label: &str,
     balanced: bool,
 ) -> Result<Vec<Snapshot>> {
@@ -215,39 +238,21 @@ fn gpu_snapshots(
     let mut elapsed = start.elapsed();
     let set_secs = timings.map_or(elapsed.as_secs_f64(), |t| t.total());
     let mut passes = GpuPasses::new(&renderer, settings, balanced, set_secs);
-    let cam = prepared.camera;
-    let (w, h) = (cam.width as usize, cam.height as usize);
     let mut out = Vec::new();
     for &target in times {
         let due = Duration::from_secs_f64(target);
         while passes.passes() == 0 || elapsed < due {
             let start = Instant::now();
             passes.next(&mut renderer, prepared, settings, LightBuilder::Gpu(ctx))?;
+            // (A balanced schedule has waited for the pass already.)
             renderer.finish()?;
             elapsed += start.elapsed();
         }
         report_set(label, passes.last_set(), passes.balanced());
         let image = renderer.read_back()?;
-        if image.cut_short_passes() > 0 {
-            eprintln!(
-                "{label}: warning: {} pass(es) cut short on the GPU (a bounded loop ran out)",
-                image.cut_short_passes()
-            );
-        }
-        let film = image.film();
-        let errors = errors(&film.mean(), converged, converged_var, w, h);
-        let spp = passes.passes();
-        eprintln!(
-            "{label}: {target} s: {spp} spp in {:.2} s (GPU), pixel RMSE {:.2} %",
-            elapsed.as_secs_f64(),
-            100.0 * errors.pixel
-        );
-        out.push(Snapshot {
-            target,
-            secs: elapsed.as_secs_f64(),
-            spp,
-            errors,
-        });
+        warn_cut_short(&image);
+        let mean = image.film().mean();
+        out.push(truth.snapshot(label, target, passes.passes(), elapsed, &mean, " (GPU)"));
     }
     Ok(out)
 }
@@ -427,9 +432,15 @@ fn scene_report(
     // The internal lights first: their passes are long, and the reference
     // is then measured at the wall time each of their snapshots took.
     let balanced = !args.fixed_renewal;
+    let truth = Truth {
+        image: c,
+        var: v,
+        width: w as usize,
+        height: h as usize,
+    };
     let measure = |settings: &RenderSettings, times: &[f64], label: String| match ctx {
-        None => snapshots(&prepared, settings, times, c, v, &label, balanced),
-        Some(ctx) => gpu_snapshots(ctx, &prepared, settings, times, c, v, &label, balanced),
+        None => snapshots(&prepared, settings, times, &truth, &label, balanced),
+        Some(ctx) => gpu_snapshots(ctx, &prepared, settings, times, &truth, &label, balanced),
     };
     let internal_snapshots = measure(&internal, times, format!("{stem} internal"))?;
     let spent: Vec<f64> = internal_snapshots.iter().map(|s| s.secs).collect();

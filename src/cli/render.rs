@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::args::{InternalArgs, TimedArgs};
-use super::support::{gpu_context, gpu_renderer};
+use super::support::{gpu_context, gpu_renderer, warn_cut_short};
 use crate::cpu::{Passes, Renderer};
 use crate::render::export::{write_exr_with_metadata, write_image};
 use crate::render::film::image_mean;
@@ -324,23 +324,6 @@ fn warn_long_render(first: f64, spp: u32) {
             "warning: the first pass took {first:.3} s, so {spp} passes will take about {} \
              (lower --spp for a shorter render)",
             crate::render::limits::duration(total)
-        );
-    }
-}
-
-/// Warns if the GPU driver cut pixel passes short
-/// ([`GpuImage::cut_short_passes`](crate::gpu::GpuImage::cut_short_passes)):
-/// those samples are too dark, and `--backend cpu` has no such limit.
-fn warn_cut_short(image: &crate::gpu::GpuImage) {
-    let cut = image.cut_short_passes();
-    if cut > 0 {
-        let all = u64::from(image.width) * u64::from(image.height) * u64::from(image.samples);
-        eprintln!(
-            "warning: the GPU driver cut {cut} of {all} pixel passes short ({:.3} %): it caps the \
-             loop iterations of one shader invocation (Mesa's software driver does), so the \
-             image is darker than it should be; render with --backend cpu, or with fewer \
-             light samples or window scatterings",
-            100.0 * cut as f64 / all.max(1) as f64
         );
     }
 }

@@ -1,6 +1,7 @@
 //! What the commands share, importing none of them: loading and resizing
 //! scenes, output folders and the converged images' variance files, a timed
-//! CPU render, and the GPU device and renderer of `--backend gpu`.
+//! CPU render, and the GPU device and renderer of `--backend gpu` (and its
+//! warning for passes the driver cut short).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -154,6 +155,23 @@ pub fn renewal_text(resample_every: u32, balanced: bool) -> String {
         (p, true) => format!(
             "light sets balanced against the passes from the measured noise and costs (the first {p} passes long)"
         ),
+    }
+}
+
+/// Warns if the GPU driver cut pixel passes short
+/// ([`GpuImage::cut_short_passes`](crate::gpu::GpuImage::cut_short_passes)):
+/// those samples are too dark, and `--backend cpu` has no such limit.
+pub fn warn_cut_short(image: &crate::gpu::GpuImage) {
+    let cut = image.cut_short_passes();
+    if cut > 0 {
+        let all = u64::from(image.width) * u64::from(image.height) * u64::from(image.samples);
+        eprintln!(
+            "warning: the GPU driver cut {cut} of {all} pixel passes short ({:.3} %): it caps the \
+             loop iterations of one shader invocation (Mesa's software driver does), so the \
+             image is darker than it should be; render with --backend cpu, or with fewer \
+             light samples or window scatterings",
+            100.0 * cut as f64 / all.max(1) as f64
+        );
     }
 }
 

@@ -145,6 +145,10 @@ pub struct BalancedRenewal {
     /// [`BalancedRenewal::sets_outweigh_passes`] as decided for the
     /// current set.
     outweigh: Option<bool>,
+    /// The estimates when the current set began (what the passes' spread
+    /// within sets and the sets' means give; they change only as a set
+    /// closes), kept for [`BalancedRenewal::noise_inflation`].
+    at_set_start: Option<RenewalEstimates>,
 }
 
 impl BalancedRenewal {
@@ -171,6 +175,7 @@ impl BalancedRenewal {
             kernel: kernel_neighbours_for_set(0),
             kernel_factors: 0.0,
             outweigh: None,
+            at_set_start: None,
         }
     }
 
@@ -251,6 +256,7 @@ impl BalancedRenewal {
             self.period = e.best_period();
         }
         self.outweigh = estimates.map(|e| self.outweighs(&e));
+        self.at_set_start = estimates;
         self.kernel = match self.outweigh {
             Some(true) => KERNEL_NEIGHBOURS,
             _ => kernel_neighbours_for_set(self.sets),
@@ -343,8 +349,10 @@ impl BalancedRenewal {
     /// `s²/n` is what a noise figure from the passes reads. The ratio is 1
     /// for a fresh set every pass and `1 + b n/a` for one set throughout.
     /// `None` until two sets are complete (with `b` clamped at 0).
+    /// Asked after every pass (the previewer's overlay), it reads the
+    /// estimates kept when the set began rather than going over the pixels.
     pub fn noise_inflation(&self) -> Option<f64> {
-        let e = self.estimates_after(SETS_BEFORE_KERNEL)?;
+        let e = self.at_set_start?;
         let n = f64::from(self.passes);
         if n < 2.0 {
             return None;
@@ -413,28 +421,45 @@ mod tests {
             .collect()
     }
 
+    /// Runs a balanced schedule over `passes` passes of `pixels` pixels
+    /// made as [`pass_image`] makes them, each set with a fresh effect of
+    /// variance `b`, passes taking `c` seconds and sets `d`; `each` sees
+    /// every pass's image. Returns the schedule and the period chosen at
+    /// each new set.
+    fn run_schedule(
+        pixels: usize,
+        passes: u32,
+        (a, b, c, d): (f64, f64, f64, f64),
+        rng: &mut Rng,
+        mut each: impl FnMut(&[Vec3]),
+    ) -> (BalancedRenewal, Vec<u32>) {
+        let mut renewal = BalancedRenewal::new(pixels, 2);
+        renewal.add_set_build(d);
+        let mut effect: Vec<f64> = (0..pixels).map(|_| b.sqrt() * normal(rng)).collect();
+        let mut periods = Vec::new();
+        for pass in 0..passes {
+            if pass > 0 && renewal.next_starts_set() {
+                periods.push(renewal.period());
+                for e in &mut effect {
+                    *e = b.sqrt() * normal(rng);
+                }
+                renewal.add_set_build(d);
+            }
+            let image = pass_image(&effect, a, rng);
+            each(&image);
+            renewal.add_pass(&image, c);
+        }
+        (renewal, periods)
+    }
+
     /// Passes made of a per-pixel set effect of variance `b`, shared by a
     /// set's passes, plus independent pass noise of variance `a`: the
     /// schedule recovers both (within 10 %) and chooses `√(ad/(bc))`.
     #[test]
     fn recovers_the_variance_components_and_the_best_period() {
         let (a, b, c, d) = (4.0f64, 0.25f64, 0.1f64, 0.4f64);
-        let pixels = 4096;
         let mut rng = Rng::for_sample(5, 0, 0);
-        let mut renewal = BalancedRenewal::new(pixels, 2);
-        renewal.add_set_build(d);
-        let mut effect: Vec<f64> = (0..pixels).map(|_| b.sqrt() * normal(&mut rng)).collect();
-        let mut periods = Vec::new();
-        for pass in 0..200 {
-            if pass > 0 && renewal.next_starts_set() {
-                periods.push(renewal.period());
-                for e in &mut effect {
-                    *e = b.sqrt() * normal(&mut rng);
-                }
-                renewal.add_set_build(d);
-            }
-            renewal.add_pass(&pass_image(&effect, a, &mut rng), c);
-        }
+        let (renewal, periods) = run_schedule(4096, 200, (a, b, c, d), &mut rng, |_| {});
         let e = renewal.estimates().expect("estimates after 200 passes");
         assert!((e.pass_variance / a - 1.0).abs() < 0.1, "{e:?}");
         assert!((e.set_variance / b - 1.0).abs() < 0.1, "{e:?}");
@@ -466,26 +491,15 @@ mod tests {
         let (a, b, c, d) = (4.0f64, 0.25f64, 0.1f64, 0.4f64);
         let pixels = 4096;
         let mut rng = Rng::for_sample(9, 0, 0);
-        let mut renewal = BalancedRenewal::new(pixels, 2);
-        renewal.add_set_build(d);
-        let mut effect: Vec<f64> = (0..pixels).map(|_| b.sqrt() * normal(&mut rng)).collect();
         let (mut sum, mut squares) = (vec![0.0f64; pixels], vec![0.0f64; pixels]);
         let passes = 200;
-        for pass in 0..passes {
-            if pass > 0 && renewal.next_starts_set() {
-                for e in &mut effect {
-                    *e = b.sqrt() * normal(&mut rng);
-                }
-                renewal.add_set_build(d);
-            }
-            let image = pass_image(&effect, a, &mut rng);
-            for ((s, q), v) in sum.iter_mut().zip(&mut squares).zip(&image) {
+        let (renewal, _) = run_schedule(pixels, passes, (a, b, c, d), &mut rng, |image| {
+            for ((s, q), v) in sum.iter_mut().zip(&mut squares).zip(image) {
                 let x = f64::from(v.x);
                 *s += x;
                 *q += x * x;
             }
-            renewal.add_pass(&image, c);
-        }
+        });
         let n = f64::from(passes);
         // The truth is 1 in every pixel.
         let error: f64 = sum.iter().map(|s| (s / n - 1.0).powi(2)).sum::<f64>() / pixels as f64;
@@ -508,19 +522,7 @@ mod tests {
 
         // Free sets: after the first three (two passes each, the least a
         // schedule starts with) a fresh set every pass.
-        let pixels = 1024;
-        let mut every_pass = BalancedRenewal::new(pixels, 2);
-        every_pass.add_set_build(0.0);
-        let mut effect: Vec<f64> = (0..pixels).map(|_| b.sqrt() * normal(&mut rng)).collect();
-        for pass in 0..60 {
-            if pass > 0 && every_pass.next_starts_set() {
-                for e in &mut effect {
-                    *e = b.sqrt() * normal(&mut rng);
-                }
-                every_pass.add_set_build(0.0);
-            }
-            every_pass.add_pass(&pass_image(&effect, a, &mut rng), c);
-        }
+        let (every_pass, _) = run_schedule(1024, 60, (a, b, c, 0.0), &mut rng, |_| {});
         assert_eq!(every_pass.period(), 1);
         // Σn_s² = 3·4 + 54 against n = 60: a factor of about 1.003.
         let f = every_pass.noise_inflation().expect("sets complete");
