@@ -61,8 +61,8 @@ fn lattice_step(a: f32, b: f32, h: f32, phase: f32, i: u32) -> vec3<f32> {
 
 // A guard against a walk that never ends, which the CPU does not need (as
 // `MAX_COLLISIONS_GUARD` of reference.wgsl: the roulette survives at most
-// 0.95 per collision).
-const WALK_COLLISIONS_GUARD: u32 = 4096u;
+// `RR_MAX_SURVIVAL`, 0.999, per collision).
+const WALK_COLLISIONS_GUARD: u32 = 65536u;
 
 // Collisions of a walk after which its directions are guided; later ones
 // come from the phase function alone: `GUIDED_COLLISIONS`, from Rust (the
@@ -440,7 +440,7 @@ fn accumulate_j_from(
                 return;
             }
             if collisions >= settings.rr_start {
-                let q = min(max_element(weight), 0.95);
+                let q = min(max_element(weight), RR_MAX_SURVIVAL);
                 if q <= 0.0 || rng_next_f32(rng) >= q {
                     return;
                 }

@@ -5,13 +5,14 @@
 // camera; at a real collision the path arriving along `dir` receives light
 // scattered into `-dir`.
 
-// Collisions after which Russian roulette starts: `RR_START_DEPTH`, from
-// Rust (the generated prelude: crate::physics::reference::RR_START_DEPTH).
+// Collisions after which Russian roulette starts: `RR_START_DEPTH`, and the
+// most a path survives the roulette at one collision: `RR_MAX_SURVIVAL`,
+// from Rust (the generated prelude: crate::physics::reference).
 
 // A guard against a path that never ends, which the CPU does not need: the
-// roulette survives at most 0.95 per collision, so the light it cuts off is
-// below 0.95^4096 (1e-91) of a path's weight.
-const MAX_COLLISIONS_GUARD: u32 = 4096u;
+// roulette survives at most `RR_MAX_SURVIVAL` (0.999) per collision, so a
+// path reaches the guard with probability below 0.999^65536 (3e-29).
+const MAX_COLLISIONS_GUARD: u32 = 65536u;
 
 // `S₁(p, n) / b(p)`: in-scattered first-scatter radiance per unit scattering
 // coefficient at `p` towards `n`, transmittance by ratio tracking
@@ -118,7 +119,7 @@ fn radiance_split(origin: vec3<f32>, dir: vec3<f32>, max_collisions: u32, rng: p
             break;
         }
         if depth >= RR_START_DEPTH {
-            let q = min(max_element(weight), 0.95);
+            let q = min(max_element(weight), RR_MAX_SURVIVAL);
             if q <= 0.0 || rng_next_f32(rng) >= q {
                 break;
             }

@@ -203,6 +203,11 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
         U32,
         crate::physics::reference::RR_START_DEPTH
     ),
+    shared!(
+        "RR_MAX_SURVIVAL",
+        F32,
+        crate::physics::reference::RR_MAX_SURVIVAL
+    ),
     shared!("SH_MAX_ORDER", U32, crate::physics::sh::MAX_ORDER),
     shared!("SH_NORM", F32Array, &crate::physics::sh::NORM),
     shared!(

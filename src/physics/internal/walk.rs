@@ -39,7 +39,7 @@ use super::clock::{march_clock, Clock, ClockLattice, ClockMarch, ClockRay, GateS
 use super::guiding::{guided_direction, GUIDED_COLLISIONS};
 use crate::physics::lights::Lights;
 use crate::physics::phase;
-use crate::physics::reference::single_scatter_source;
+use crate::physics::reference::{roulette, single_scatter_source};
 use crate::physics::rng::Rng;
 use crate::physics::tracking::{free_flight, spectral_event, TentativeEvent, TentativeSteps};
 use crate::physics::volume::{DensityField, Volume};
@@ -520,12 +520,8 @@ impl<D: DensityField> Walks<'_, D> {
                     }
                     weight *= vol.optics.albedo;
                     collisions += 1;
-                    if collisions >= settings.rr_start {
-                        let q = weight.max_element().min(0.95);
-                        if q <= 0.0 || rng.next_f32() >= q {
-                            return;
-                        }
-                        weight /= q;
+                    if collisions >= settings.rr_start && !roulette(&mut weight, rng) {
+                        return;
                     }
                     let (u1, u2) = (rng.next_f32(), rng.next_f32());
                     dir = match guide.filter(|_| collisions <= GUIDED_COLLISIONS) {
