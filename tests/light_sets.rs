@@ -9,6 +9,7 @@ mod common;
 
 use std::sync::Arc;
 
+use lantern::physics::internal::sources::kernel_neighbours_for_noisy_set;
 use lantern::render::film::Film;
 use lantern::render::PreparedScene;
 use lantern::scene::Method;
@@ -309,18 +310,21 @@ fn balanced_kernels(scene: &str, sets: u32) -> Vec<u32> {
     kernels
 }
 
-/// A timed render keeps the first set's wide kernel where the light sets'
-/// noise outweighs the passes' and shrinks it where it does not: the thick
+/// A timed render shrinks the kernel slowly (`64/√(j+1)` lights in set `j`)
+/// where the light sets' noise outweighs the passes' and as any render does
+/// (64, 32, 21, then 16) where it does not: the thick
 /// cumulus's walks are tens of times noisier per second than its passes
 /// (`lantern noise`: variance × time 21 700 per set against 230 per pass),
 /// the wispy smoke's sets are a twentieth of its passes. Both after the
 /// first two sets, which follow the fixed schedule (64, 32 lights).
 #[test]
-fn timed_renders_keep_the_kernel_wide_where_the_sets_are_noisy() {
+fn timed_renders_shrink_the_kernel_slowly_where_the_sets_are_noisy() {
     let cumulus = balanced_kernels("assets/scenes/suite/thick_cumulus.ron", 5);
     eprintln!("cumulus kernels {cumulus:?}");
     assert_eq!(&cumulus[..2], &[64, 32]);
-    assert!(cumulus[2..].iter().all(|&k| k == 64), "{cumulus:?}");
+    for (j, &k) in cumulus.iter().enumerate().skip(2) {
+        assert_eq!(k, kernel_neighbours_for_noisy_set(j as u32), "{cumulus:?}");
+    }
     let wispy = balanced_kernels("assets/scenes/suite/wispy_smoke.ron", 5);
     eprintln!("wispy smoke kernels {wispy:?}");
     assert_eq!(&wispy[..4], &[64, 32, 21, 16], "{wispy:?}");

@@ -219,11 +219,11 @@ impl LightSetStatus {
         })
     }
 
-    /// In words, short: "light set 7, kernel 64 lights (kept wide: noisy
-    /// sets)".
+    /// In words, short: "light set 7, kernel 22 lights (shrinking slowly:
+    /// noisy sets)".
     pub fn label(&self) -> String {
         let why = match self.sets_outweigh_passes {
-            Some(true) => " (kept wide: noisy sets)",
+            Some(true) => " (shrinking slowly: noisy sets)",
             Some(false) => " (shrunk: quiet sets)",
             None => "",
         };
@@ -1248,13 +1248,13 @@ mod tests {
         assert_eq!(first.label(), "light set 0, kernel 64 lights");
         let wide = LightSetStatus {
             set: 7,
-            kernel_neighbours: 64,
+            kernel_neighbours: 22,
             sets_outweigh_passes: Some(true),
             noise_scale: Some(1.4),
         };
         assert_eq!(
             wide.label(),
-            "light set 7, kernel 64 lights (kept wide: noisy sets)"
+            "light set 7, kernel 22 lights (shrinking slowly: noisy sets)"
         );
         let shrunk = LightSetStatus {
             sets_outweigh_passes: Some(false),
