@@ -219,7 +219,7 @@ pub fn kernel_neighbours_for_set(set: u32) -> u32 {
 /// light sets add more noise than its passes
 /// ([`BalancedRenewal::sets_outweigh_passes`](crate::render::renewal::BalancedRenewal::sets_outweigh_passes)):
 /// [`KERNEL_NEIGHBOURS`]` / √(set + 1)`, at least
-/// [`KERNEL_NEIGHBOURS_FLOOR`] — 64, 45, 36, 32, 28, …, 16 from set 15.
+/// [`KERNEL_NEIGHBOURS_FLOOR`] — 64, 45, 36, 32, 28, …, 16 from set 14.
 ///
 /// Where the sets' noise dominates, one set's variance grows about as
 /// `1/k` as the kernel narrows, so shrinking it as fast as
