@@ -59,10 +59,9 @@ fn lattice_step(a: f32, b: f32, h: f32, phase: f32, i: u32) -> vec3<f32> {
 // crate::gpu::walks::GPU_MAX_TERMS + 1; src/gpu/walks.rs refuses larger `N`
 // with an error).
 
-// A guard against a walk that never ends, which the CPU does not need (as
-// `MAX_COLLISIONS_GUARD` of reference.wgsl: the roulette survives at most
-// `RR_MAX_SURVIVAL`, 0.999, per collision).
-const WALK_COLLISIONS_GUARD: u32 = 65536u;
+// A walk that never ends is guarded against as a reference path is
+// (`MAX_COLLISIONS_GUARD` of reference.wgsl), which the CPU does not need;
+// its Russian roulette is the reference's `roulette`.
 
 // Collisions of a walk after which its directions are guided; later ones
 // come from the phase function alone: `GUIDED_COLLISIONS`, from Rust (the
@@ -436,15 +435,11 @@ fn accumulate_j_from(
             origin += dir * flight.t;
             weight *= scene.medium.albedo;
             collisions += 1u;
-            if collisions >= WALK_COLLISIONS_GUARD {
+            if collisions >= MAX_COLLISIONS_GUARD {
                 return;
             }
-            if collisions >= settings.rr_start {
-                let q = min(max_element(weight), RR_MAX_SURVIVAL);
-                if q <= 0.0 || rng_next_f32(rng) >= q {
-                    return;
-                }
-                weight /= q;
+            if collisions >= settings.rr_start && !roulette(&weight, rng) {
+                return;
             }
             let u1 = rng_next_f32(rng);
             let u2 = rng_next_f32(rng);

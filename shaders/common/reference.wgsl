@@ -14,6 +14,20 @@
 // path reaches the guard with probability below 0.999^65536 (3e-29).
 const MAX_COLLISIONS_GUARD: u32 = 65536u;
 
+// Russian roulette at a collision past `RR_START_DEPTH`, for the reference's
+// paths and the internal lights' walks alike (`roulette`): keeps the path
+// with probability `q = min(max(weight), RR_MAX_SURVIVAL)` and divides its
+// weight by `q`; returns whether it goes on. Draws one number unless `q` is
+// zero.
+fn roulette(weight: ptr<function, vec3<f32>>, rng: ptr<function, Rng>) -> bool {
+    let q = min(max_element(*weight), RR_MAX_SURVIVAL);
+    if q <= 0.0 || rng_next_f32(rng) >= q {
+        return false;
+    }
+    *weight /= q;
+    return true;
+}
+
 // `S₁(p, n) / b(p)`: in-scattered first-scatter radiance per unit scattering
 // coefficient at `p` towards `n`, transmittance by ratio tracking
 // (`single_scatter_source`).
@@ -118,12 +132,8 @@ fn radiance_split(origin: vec3<f32>, dir: vec3<f32>, max_collisions: u32, rng: p
         if depth >= max_collisions || depth >= MAX_COLLISIONS_GUARD {
             break;
         }
-        if depth >= RR_START_DEPTH {
-            let q = min(max_element(weight), RR_MAX_SURVIVAL);
-            if q <= 0.0 || rng_next_f32(rng) >= q {
-                break;
-            }
-            weight /= q;
+        if depth >= RR_START_DEPTH && !roulette(&weight, rng) {
+            break;
         }
         let u1 = rng_next_f32(rng);
         let u2 = rng_next_f32(rng);
