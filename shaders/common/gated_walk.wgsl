@@ -54,10 +54,10 @@ fn lattice_step(a: f32, b: f32, h: f32, phase: f32, i: u32) -> vec3<f32> {
     return vec3<f32>(p0, b, b - 0.5 * l * l / h);
 }
 
-// Most gates a walk on the GPU records, `N + 1` (a private array per
+// Slots of a walk's per-term output on the GPU (a private array per
 // invocation): `GPU_MAX_GATES`, from Rust (the generated prelude:
-// crate::gpu::walks::GPU_MAX_TERMS + 1; src/gpu/walks.rs refuses larger `N`
-// with an error).
+// crate::physics::internal::clock::RESOLVED_TERMS + 1). Terms past the last
+// slot add to it (`term_slot`), so a walk still runs to gate `N`.
 
 // A walk that never ends is guarded against as a reference path is
 // (`MAX_COLLISIONS_GUARD` of reference.wgsl), which the CPU does not need;
@@ -347,7 +347,7 @@ fn gate_add(
     let scatter = scene.medium.albedo * scene.medium.sigma_t;
     let source = single_scatter_source(zk, nk, rng);
     let v = w * scatter * rho * source;
-    (*out)[k] += v;
+    (*out)[min(k, GPU_MAX_GATES - 1u)] += v;
     if !scattered {
         walk_unscattered += v;
     }
@@ -357,7 +357,7 @@ fn gate_add(
 // (`accumulate_j_from`, with the walk of `walk` inlined): a backward walk
 // from `z` along `−n` by spectral tracking, albedo and Russian roulette at
 // real collisions, phase-sampled directions, gates at clock `k s*`; leaving
-// the box ends it. `settings.n_terms` must be below `GPU_MAX_GATES`.
+// the box ends it. Terms from `GPU_MAX_GATES − 1` on share the last slot.
 // `walk_unscattered` receives the part added before the first collision.
 fn accumulate_j_from(
     z: vec3<f32>,
@@ -374,7 +374,7 @@ fn accumulate_j_from(
     }
     let geometric = settings.clock == CLOCK_GEOMETRIC;
     let s_star = max(settings.s_star, 0.0);
-    let last = min(settings.n_terms, GPU_MAX_GATES - 1u);
+    let last = settings.n_terms;
     var weight = vec3<f32>(1.0);
     gate_add(0u, weight, z, n, false, settings, first, rho_z, rng, out);
     if last == 0u {

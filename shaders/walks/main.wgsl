@@ -110,6 +110,8 @@ fn walk_lights(
     let rho = light.w;
     let volume = placed[2u * i + 1u].x;
     let count = wp.sh_count;
+    // The last slot of the per-term outputs: terms past it add to it
+    // (`term_slot`), so the walks still run to gate `N`.
     let terms = min(wp.n_terms, GPU_MAX_GATES - 1u);
     let record = i * wp.record_stride;
     let n_ext = light_count();
@@ -138,7 +140,7 @@ fn walk_lights(
             n = eye_direction(x);
         }
         var walk_rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_STREAM + 1u + w);
-        let settings = GateSettings(wp.s_star, terms, wp.clock, wp.rr_start);
+        let settings = GateSettings(wp.s_star, wp.n_terms, wp.clock, wp.rr_start);
         // The walks towards the eye keep only the collided part.
         walk_collided_only = towards_eye;
         accumulate_j_from(x, n, settings, 1u, &walk_rng, &per_walk);

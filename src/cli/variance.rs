@@ -216,7 +216,7 @@ pub fn light_walk_stats(
         clock: cache.params.clock,
         rr_start: RR_START_DEPTH,
     };
-    let gates = gate.gate_count();
+    let gates = gate.term_slots();
     let stats: Vec<WalkStats> = cache
         .lights
         .iter()

@@ -564,11 +564,6 @@ pub const WALK_LANES: u32 = 64;
 /// `PLACEMENT_LANES`, its `@workgroup_size`, is generated from it).
 pub const PLACEMENT_LANES: u32 = 64;
 
-/// The largest series truncation `N` the GPU walks support: each
-/// invocation keeps its walk's `N + 1` terms in a private array (the
-/// WGSL's `GPU_MAX_GATES` is generated as this plus one).
-pub const GPU_MAX_TERMS: u32 = 256;
-
 /// `view` of the display's clamp transform (`VIEW_CLAMP`).
 pub const VIEW_CLAMP: u32 = 0;
 /// `view` of the display's filmic transform.

@@ -162,7 +162,11 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!("WALK_LANES", U32, crate::gpu::mirrors::WALK_LANES),
     shared!("PLACEMENT_LANES", U32, crate::gpu::mirrors::PLACEMENT_LANES),
     // The walks' private array of gates, `N + 1` for the largest `N`.
-    shared!("GPU_MAX_GATES", U32, crate::gpu::mirrors::GPU_MAX_TERMS + 1),
+    shared!(
+        "GPU_MAX_GATES",
+        U32,
+        crate::physics::internal::clock::RESOLVED_TERMS + 1
+    ),
     // The random streams (`physics/rng.rs`, `shaders/common/rng.wgsl`).
     shared!("RNG_MULTIPLIER", U32, crate::physics::rng::MULTIPLIER),
     shared!(

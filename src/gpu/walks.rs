@@ -37,10 +37,11 @@ use wgpu::util::DeviceExt;
 
 use super::context::{GpuContext, GpuError};
 use super::mirrors::{
-    GpuPassParams, GpuPlacementParams, GpuWalkParams, GPU_MAX_TERMS, PLACEMENT_LANES, WALK_LANES,
+    GpuPassParams, GpuPlacementParams, GpuWalkParams, PLACEMENT_LANES, WALK_LANES,
 };
 use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer, SceneBuffers};
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
+use crate::physics::internal::clock::term_slots;
 use crate::physics::internal::sources::{
     kernel_radius_for, place_internal_lights, within_view_reach, InternalLight, InternalLights,
     InternalParams, LightSources,
@@ -120,13 +121,6 @@ pub fn build_internal_lights_gpu(
     prepared: &PreparedScene,
     params: &InternalParams,
 ) -> Result<InternalLights, GpuError> {
-    if params.terms > GPU_MAX_TERMS {
-        return Err(GpuError::Unsupported {
-            what: "N (series truncation) of the GPU walks",
-            value: params.terms as u64,
-            max: GPU_MAX_TERMS as u64,
-        });
-    }
     // Refuse before any work if the results cannot be bound.
     let n_ext = prepared.lights.suns.len() + prepared.lights.points.len();
     let stride = record_stride(params, n_ext) as usize;
@@ -146,7 +140,7 @@ pub fn build_internal_lights_gpu(
     let m = build.light_count as usize;
     let (lights, _) = unpack_placed(&placed_raw, m);
     let count = sh_count(params.sh_order.min(MAX_ORDER));
-    let gates = params.terms as usize + 1;
+    let gates = term_slots(params.terms);
     let v3 = |v: &[f32; 4]| Vec3::new(v[0], v[1], v[2]);
     let mut sources = LightSources::with_capacity(lights, count, n_ext, gates);
     for record in out.chunks_exact(stride).take(m) {
@@ -186,11 +180,12 @@ pub fn build_internal_lights_gpu(
 
 /// The vec4 per light of the walks' output (see
 /// `shaders/walks/main.wgsl`): the three SH sets, the arrival from each of
-/// `n_ext` external lights, the energies of `k = 1..=N` after `E_0`, and
-/// with view walks their value.
+/// `n_ext` external lights, the energies of `k = 1..=N` after `E_0` (those
+/// past [`RESOLVED_TERMS`](crate::physics::internal::clock::RESOLVED_TERMS) summed in the last), and with view walks their
+/// value.
 fn record_stride(params: &InternalParams, n_ext: usize) -> u32 {
     let count = sh_count(params.sh_order.min(MAX_ORDER)) as u32;
-    3 * count + n_ext as u32 + params.terms + 1 + u32::from(params.view_walks > 0)
+    3 * count + n_ext as u32 + term_slots(params.terms) as u32 + u32::from(params.view_walks > 0)
 }
 
 /// A uniform buffer holding `value`.

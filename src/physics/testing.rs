@@ -149,8 +149,8 @@ pub(crate) fn forward_scattering_walk() -> (Volume<Field>, Lights, GateSettings,
 /// One walk's collided part of its terms `k ≥ 1` ([`collided`]) and
 /// the part before its first collision, by [`Walks::accumulate_j_from`].
 pub(crate) fn split_walk(walks: &Walks<Field>, z: Vec3, n: Vec3, rng: &mut Rng) -> (Vec3, Vec3) {
-    let mut out = vec![Vec3::ZERO; walks.gates.gate_count()];
-    let mut unscattered = vec![Vec3::ZERO; walks.gates.gate_count()];
+    let mut out = vec![Vec3::ZERO; walks.gates.term_slots()];
+    let mut unscattered = vec![Vec3::ZERO; walks.gates.term_slots()];
     walks.accumulate_j_from(z, n, 1, rng, &mut out, Some(&mut unscattered));
     (
         collided(&out, &unscattered),

@@ -156,9 +156,16 @@ impl LightsView {
         self.lights.kernel_radius
     }
 
-    /// Energy carried by each series term `k = 0..N`.
+    /// Energy carried by each series term `k = 0..N`; where `N` exceeds
+    /// [`RESOLVED_TERMS`](crate::physics::internal::clock::RESOLVED_TERMS),
+    /// the last element sums the terms from it to `N`.
     pub fn term_energy(&self) -> &[Vec3] {
         &self.lights.term_energy
+    }
+
+    /// The series truncation `N` these lights were built with.
+    pub fn terms(&self) -> u32 {
+        self.lights.params.terms
     }
 }
 

@@ -16,8 +16,10 @@ use glam::Vec3;
 use super::sky::{SkyState, SkyUi};
 use super::state::{CompareMode, Document, LightQuantity, NavPreset, Session, Toast};
 use super::widgets::rgb_intensity_ui;
+use crate::physics::internal::clock::RESOLVED_TERMS;
 use crate::physics::sh::MAX_ORDER;
 use crate::render::tonemap::ViewTransform;
+use crate::scene::settings::MAX_TERMS;
 use crate::scene::{Clock, L1Form, Quality};
 use crate::scene::{Light, Method};
 use crate::session::{Backend, LightsView};
@@ -177,14 +179,15 @@ fn method_knobs_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              scattering angle.",
         );
     ui.add(
-        Slider::new(&mut internal.knobs.terms, 0..=512)
+        Slider::new(&mut internal.knobs.terms, 0..=MAX_TERMS)
             .logarithmic(true)
             .text(TERMS),
     )
     .on_hover_text(
         "Series truncation N: terms k = 0..N of J = Σ G(k s*) S₁. Too few and light \
-         that travels longer than (N+1)·s* is lost (the cloud's core goes dark); \
-         the plot of term energies shows when more terms stop adding light.",
+         that travels longer than (N+1)·s* is lost (a thick cloud's lit body goes \
+         dark); the plot of term energies shows when more terms stop adding light. \
+         The default, 4096 windows, lets the walks run until they end on their own.",
     );
     let mut quality = internal.quality;
     egui::ComboBox::from_label(QUALITY)
@@ -611,12 +614,32 @@ fn terms_plot_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
         ui.label("The energy of each series term appears once internal lights are sampled.");
         return;
     };
-    let bars: Vec<Bar> = lights
-        .term_energy()
+    let grey = |e: &Vec3| e.dot(Vec3::splat(1.0 / 3.0)) as f64;
+    let energy = lights.term_energy();
+    // Past `RESOLVED_TERMS` the last element sums the remaining terms: it
+    // is said in words, not drawn as one more term.
+    let folded = lights.terms() > RESOLVED_TERMS;
+    let (resolved, tail) = match energy.split_last() {
+        Some((last, rest)) if folded => (rest, Some(grey(last))),
+        _ => (energy, None),
+    };
+    let bars: Vec<Bar> = resolved
         .iter()
         .enumerate()
-        .map(|(k, e)| Bar::new(k as f64, e.dot(Vec3::splat(1.0 / 3.0)) as f64))
+        .map(|(k, e)| Bar::new(k as f64, grey(e)))
         .collect();
+    if let Some(tail) = tail {
+        let total: f64 = energy.iter().map(grey).sum();
+        let share = if total > 0.0 {
+            100.0 * tail / total
+        } else {
+            0.0
+        };
+        ui.label(format!(
+            "terms {RESOLVED_TERMS}–{}: {share:.2} % of the energy (not drawn)",
+            lights.terms()
+        ));
+    }
     Plot::new("term_energy")
         .height(140.0)
         .x_axis_label("term k")

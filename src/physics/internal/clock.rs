@@ -60,12 +60,37 @@ pub struct GateSettings {
     pub rr_start: u32,
 }
 
+/// Terms of the series a walk's output resolves one by one. A truncation
+/// `N` beyond it still runs the walks to gate `N` (the image is the whole
+/// series up to `N`), but the terms `k ≥ RESOLVED_TERMS` share the last
+/// slot of the per-term outputs ([`GateSettings::term_slots`]): their sum
+/// is all that the lights, the gather and the energies' plot need, and it
+/// keeps each light's storage (and the GPU walks' private arrays) bounded
+/// whatever `N`.
+pub const RESOLVED_TERMS: u32 = 256;
+
 impl GateSettings {
-    /// Number of gates, `N + 1`.
+    /// Slots of a walk's per-term output, `min(N, RESOLVED_TERMS) + 1`:
+    /// slot `k` holds term `k`, except the last one, which holds every term
+    /// from it to `N` ([`term_slot`]).
     #[inline]
-    pub fn gate_count(&self) -> usize {
-        self.n_terms as usize + 1
+    pub fn term_slots(&self) -> usize {
+        term_slots(self.n_terms)
     }
+}
+
+/// Slots of the per-term outputs for a truncation `N` of `n_terms`,
+/// `min(N, RESOLVED_TERMS) + 1` ([`GateSettings::term_slots`]).
+#[inline]
+pub fn term_slots(n_terms: u32) -> usize {
+    n_terms.min(RESOLVED_TERMS) as usize + 1
+}
+
+/// The slot of a walk's per-term output that term `k` adds to: `k`, or
+/// the last slot, [`RESOLVED_TERMS`], for the terms beyond it.
+#[inline]
+pub fn term_slot(k: u32) -> usize {
+    k.min(RESOLVED_TERMS) as usize
 }
 
 /// The rate `d(clock)/dℓ` at `p`: 1 for the geometric clock, the grey

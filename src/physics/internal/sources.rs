@@ -315,7 +315,9 @@ pub struct InternalLights {
     pub softening: f32,
     /// The lights.
     pub lights: Vec<InternalLight>,
-    /// `E_k` for `k = 0..=N` (see the module doc), RGB.
+    /// `E_k` for `k = 0..=N` (see the module doc), RGB; where `N` exceeds
+    /// [`RESOLVED_TERMS`](super::clock::RESOLVED_TERMS), the last element is
+    /// the sum of the terms from it to `N` ([`term_slot`](super::clock::term_slot)).
     pub term_energy: Vec<Vec3>,
     /// `∫ρ` over the box, as estimated by the placement.
     pub density_integral: f32,
@@ -391,7 +393,9 @@ pub struct LightSources {
     /// The light arriving from each external light (in `Lights`' order,
     /// suns first), per light.
     pub arrival: Vec<Vec3>,
-    /// The energy each term `k = 0..=N` carries over all lights.
+    /// The energy each term `k = 0..=N` carries over all lights (the terms
+    /// past [`RESOLVED_TERMS`](super::clock::RESOLVED_TERMS) summed in the
+    /// last element).
     pub term_energy: Vec<Vec3>,
     /// Per light, the collided part of `J` towards the eye per unit chance
     /// of the collision (see the module doc, "Walks towards the eye");
@@ -406,7 +410,8 @@ pub struct LightSources {
 
 impl LightSources {
     /// Room for the sources of `lights`, each with `count` SH coefficients
-    /// per set, `n_ext` arrival values and `gates` terms of energy.
+    /// per set, `n_ext` arrival values and `gates` slots of energy per term
+    /// ([`GateSettings::term_slots`]).
     pub fn with_capacity(
         lights: Vec<InternalLight>,
         count: usize,
@@ -732,13 +737,14 @@ impl InternalLights {
         let order = params.sh_order.min(MAX_ORDER);
         let count = sh_count(order);
         let n_ext = external.suns.len() + external.points.len();
-        let terms = params.terms as usize;
         let gate = GateSettings {
             s_star: params.s_star,
             n_terms: params.terms,
             clock: params.clock,
             rr_start: RR_START_DEPTH,
         };
+        // Per-term slots: terms past `RESOLVED_TERMS` share the last one.
+        let slots = gate.term_slots();
         let walker = Walks::guided(vol, external, gate);
         let walks = params.walks.max(1);
         let tr_estimates = (walks / 4).clamp(4, 64);
@@ -779,12 +785,12 @@ impl InternalLights {
                 let mut f = vec![Vec3::ZERO; count];
                 let mut multi = vec![Vec3::ZERO; count];
                 let mut scattered = vec![Vec3::ZERO; count];
-                let mut energy = vec![Vec3::ZERO; terms + 1];
+                let mut energy = vec![Vec3::ZERO; slots];
                 // k = 0: ∫ S₁ dn = b Σ T E, since the phase function is
                 // normalised.
                 energy[0] = light.weight * light.density * scatter * arrival.iter().sum::<Vec3>();
-                let mut per_walk = vec![Vec3::ZERO; terms + 1];
-                let mut unscattered = vec![Vec3::ZERO; terms + 1];
+                let mut per_walk = vec![Vec3::ZERO; slots];
+                let mut unscattered = vec![Vec3::ZERO; slots];
                 let mut y = [0.0f32; MAX_COUNT];
                 let w_dir = 4.0 * std::f32::consts::PI / walks as f32;
                 // One walk from `x` with `n`, its terms `k ≥ 1` and their
@@ -820,8 +826,8 @@ impl InternalLights {
                         scattered[c] += after_collision * (y[c] * w_dir);
                         f[c] += first * (y[c] * w_dir);
                     }
-                    for k in 1..=terms {
-                        energy[k] += per_walk[k] * (light.weight * w_dir);
+                    for (e, v) in energy.iter_mut().zip(&per_walk).skip(1) {
+                        *e += *v * (light.weight * w_dir);
                     }
                 }
                 // Walks towards the eye: the collided part in the one
@@ -852,7 +858,7 @@ impl InternalLights {
         if cancel.load(Ordering::Relaxed) {
             return None;
         }
-        let mut sources = LightSources::with_capacity(lights, count, n_ext, terms + 1);
+        let mut sources = LightSources::with_capacity(lights, count, n_ext, slots);
         sources.kernel_radius = Some(kernel_radius);
         for w in walked.into_iter().flatten() {
             if params.view_walks > 0 {

@@ -98,8 +98,9 @@ impl<'a, D: DensityField> Walks<'a, D> {
         }
     }
 
-    /// Adds one walk's estimate of `Ĵ_k(z, n)`, `k = 0..out.len()−1` (at
-    /// most `N`), to `out`: with the geometric clock
+    /// Adds one walk's estimate of `Ĵ_k(z, n)`, `k = 0..=N`, to `out`, the
+    /// terms from `out.len() − 1` on summed in its last element (as
+    /// [`term_slot`](super::clock::term_slot) folds them): with the geometric clock
     /// `Ĵ_k = J_k = G(k s*) S₁`, each gate adding
     /// `weight · b(z_k) · (S₁/b)(z_k, n_k)`; with the optical-depth clock
     /// `Ĵ_k = c_g(z) J^τ_k`, each gate adding
@@ -127,25 +128,21 @@ impl<'a, D: DensityField> Walks<'a, D> {
         out: &mut [Vec3],
         mut unscattered: Option<&mut [Vec3]>,
     ) {
-        let gates = match &unscattered {
+        let slots = match &unscattered {
             Some(u) => out.len().min(u.len()),
             None => out.len(),
-        }
-        .min(self.gates.gate_count());
-        if gates == 0 {
+        };
+        if slots == 0 {
             return;
         }
-        let limited = Walks {
-            gates: GateSettings {
-                n_terms: (gates - 1) as u32,
-                ..self.gates
-            },
-            ..*self
-        };
-        limited.gate_sources(z, n, first, false, rng, |k, v, scattered| {
-            out[k as usize] += v;
+        // Terms past the last slot add to it (`term_slot`'s folding, for
+        // any length of `out`).
+        let last_slot = slots - 1;
+        self.gate_sources(z, n, first, false, rng, |k, v, scattered| {
+            let slot = (k as usize).min(last_slot);
+            out[slot] += v;
             if let (false, Some(u)) = (scattered, unscattered.as_deref_mut()) {
-                u[k as usize] += v;
+                u[slot] += v;
             }
         });
     }
@@ -167,7 +164,7 @@ impl<'a, D: DensityField> Walks<'a, D> {
     /// One walk's estimate of `Ĵ_k(z, n)` for `k = 0..=N` (see
     /// [`Walks::accumulate_j`]).
     pub fn estimate_j(&self, z: Vec3, n: Vec3, rng: &mut Rng) -> Vec<Vec3> {
-        let mut out = vec![Vec3::ZERO; self.gates.gate_count()];
+        let mut out = vec![Vec3::ZERO; self.gates.term_slots()];
         self.accumulate_j(z, n, rng, &mut out);
         out
     }
@@ -629,6 +626,156 @@ mod tests {
                 "channel {c}: the test cannot tell a lost share"
             );
         }
+    }
+
+    /// A truncation past [`RESOLVED_TERMS`](super::super::clock::RESOLVED_TERMS)
+    /// still walks to gate `N`: with the same random numbers, an output
+    /// of `N + 1` slots and one of [`GateSettings::term_slots`] agree on
+    /// every resolved term, and the last slot holds the sum of the rest
+    /// (which the walks here do reach).
+    #[test]
+    fn terms_past_the_resolved_ones_fold_into_the_last_slot() {
+        use super::super::clock::{term_slot, RESOLVED_TERMS};
+        let (vol, lights, mut settings, z, n) = forward_scattering_walk();
+        settings.s_star = 0.005;
+        settings.n_terms = RESOLVED_TERMS + 120;
+        let walks = Walks::guided(&vol, &lights, settings);
+        let slots = settings.term_slots();
+        assert_eq!(slots, RESOLVED_TERMS as usize + 1);
+        assert_eq!(term_slot(RESOLVED_TERMS + 7), slots - 1);
+        let mut folded_walks = 0;
+        for w in 0..400 {
+            let mut full = vec![Vec3::ZERO; settings.n_terms as usize + 1];
+            let mut full_u = full.clone();
+            let mut folded = vec![Vec3::ZERO; slots];
+            let mut folded_u = folded.clone();
+            walks.accumulate_j_from(
+                z,
+                n,
+                1,
+                &mut Rng::for_sample(3, w, 0),
+                &mut full,
+                Some(&mut full_u),
+            );
+            walks.accumulate_j_from(
+                z,
+                n,
+                1,
+                &mut Rng::for_sample(3, w, 0),
+                &mut folded,
+                Some(&mut folded_u),
+            );
+            let last = slots - 1;
+            assert_eq!(full[..last], folded[..last], "walk {w}");
+            assert_eq!(full_u[..last], folded_u[..last], "walk {w}");
+            let rest: Vec3 = full[last..].iter().sum();
+            let rest_u: Vec3 = full_u[last..].iter().sum();
+            let tol = 1e-5 * rest.abs().max_element().max(1e-30);
+            assert!(
+                (folded[last] - rest).abs().max_element() <= tol,
+                "walk {w}: {} vs {rest}",
+                folded[last]
+            );
+            assert!(
+                (folded_u[last] - rest_u).abs().max_element() <= tol,
+                "walk {w}"
+            );
+            if full[last + 1..].iter().any(|v| *v != Vec3::ZERO) {
+                folded_walks += 1;
+            }
+        }
+        assert!(
+            folded_walks > 40,
+            "only {folded_walks} walks reached past the resolved terms"
+        );
+    }
+
+    /// The presets' series runs until the walks end, even in a thick
+    /// cloud: a slab 40 mean free paths thick of albedo 0.999 that scatters
+    /// isotropically (so light diffuses through hundreds of collisions),
+    /// lit from above, its `J` read just under the lit face towards the
+    /// sky, with the default `s*` and truncation. Walks carried to gate
+    /// [`MAX_TERMS`](crate::scene::settings::MAX_TERMS) show that the
+    /// terms past the default `N` hold less than half a percent of the
+    /// light, while those past 256 windows — the default before — hold
+    /// more than two percent (the medium is one where the truncation
+    /// shows).
+    #[test]
+    fn the_default_series_keeps_a_thick_clouds_long_paths() {
+        use crate::physics::lights::Sun;
+        use crate::scene::settings::{Quality, DEFAULT_S_STAR, MAX_TERMS};
+        let mut vol = boxed(1.0, 0.0, 0.999, 20.0, 4);
+        vol.optics.g = 0.0;
+        let lights = Lights {
+            suns: vec![Sun {
+                direction: Vec3::NEG_Y,
+                irradiance: Vec3::ONE,
+            }],
+            points: Vec::new(),
+            environment: None,
+        };
+        let default_terms = Quality::Final.settings().knobs.terms;
+        let settings = GateSettings {
+            s_star: DEFAULT_S_STAR,
+            n_terms: MAX_TERMS,
+            clock: Clock::OpticalDepth,
+            rr_start: crate::physics::reference::RR_START_DEPTH,
+        };
+        let walks = Walks::guided(&vol, &lights, settings);
+        let z = Vec3::new(0.0, 19.0, 0.0);
+        let scatter = vol.optics.albedo * vol.optics.sigma_t;
+        // Per walk: all its light, that past 256 windows, that past the
+        // default truncation.
+        let count = 20_000u32;
+        let (mut sum, mut sum2) = ([0.0f64; 3], [0.0f64; 3]);
+        for w in 0..count {
+            let mut rng = Rng::for_sample(41, w, 0);
+            let mut v = [0.0f64; 3];
+            walks.walk(
+                z,
+                Vec3::Y,
+                &mut rng,
+                |k, wt, zk, nk, _, rng| {
+                    if k == 0 || wt == Vec3::ZERO {
+                        return;
+                    }
+                    let s =
+                        (wt * scatter * single_scatter_source(&vol, &lights, zk, nk, rng)).x as f64;
+                    v[0] += s;
+                    if k > 256 {
+                        v[1] += s;
+                    }
+                    if k > default_terms {
+                        v[2] += s;
+                    }
+                },
+                None,
+            );
+            for i in 0..3 {
+                sum[i] += v[i];
+                sum2[i] += v[i] * v[i];
+            }
+        }
+        let n = count as f64;
+        let mean = sum.map(|s| s / n);
+        let se: Vec<f64> = (0..3)
+            .map(|i| ((sum2[i] / n - mean[i] * mean[i]).max(0.0) / n).sqrt())
+            .collect();
+        let share = |i: usize| (mean[i] / mean[0], se[i] / mean[0]);
+        let (past_256, past_256_se) = share(1);
+        let (past_default, past_default_se) = share(2);
+        eprintln!(
+            "J {:.4e} ± {:.1e}; past 256 windows {:.2} ± {:.2} %, past N = {default_terms}: {:.3} ± {:.3} %",
+            mean[0], se[0], 100.0 * past_256, 100.0 * past_256_se, 100.0 * past_default, 100.0 * past_default_se
+        );
+        assert!(
+            past_default + 2.0 * past_default_se < 0.005,
+            "the default truncation drops light"
+        );
+        assert!(
+            past_256 - 4.0 * past_256_se > 0.02,
+            "the test's medium does not show truncation"
+        );
     }
 
     #[test]
