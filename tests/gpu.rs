@@ -1557,6 +1557,54 @@ fn passes_cut_short_by_the_driver_are_reported() {
     }
 }
 
+/// The internal lights' walks cut short by the driver's loop cap are
+/// counted (`InternalLights::cut_short_walks`): on llvmpipe a walk of
+/// tens of thousands of gates (the thick cumulus with windows of 0.05 mean
+/// free paths and `N` 65536, a shadow ray at every gate) must be reported;
+/// on a hardware adapter nothing is cut. The defaults' walks on the same
+/// cloud (`N` 4096) stay under the cap on every adapter.
+#[test]
+fn walks_cut_short_by_the_driver_are_reported() {
+    let Some(ctx) = common::gpu() else { return };
+    let llvmpipe = ctx.describe().contains("llvmpipe");
+    let prepared = prepare_small("assets/scenes/suite/thick_cumulus.ron", 16);
+    let cut = |edit: &dyn Fn(&mut InternalParams)| {
+        let params = walk_params(&prepared, |p| {
+            p.lights = 32;
+            p.walks = 8;
+            p.seed = 2;
+            edit(p);
+        });
+        let t = Instant::now();
+        let built =
+            build_internal_lights_gpu(&ctx, &prepared, &params).unwrap_or_else(|e| panic!("{e:#}"));
+        (built.cut_short_walks, t.elapsed().as_secs_f64())
+    };
+    let (heavy, heavy_secs) = cut(&|p| {
+        p.s_star = 0.05;
+        p.terms = lantern::scene::settings::MAX_TERMS;
+    });
+    let final_preset = lantern::scene::Quality::Final.settings();
+    let (defaults, defaults_secs) = cut(&|p| p.terms = final_preset.knobs.terms);
+    println!(
+        "walks cut short on {}: {heavy} of 256 (s* 0.05, N 65536, {heavy_secs:.2} s), \
+         {defaults} of 256 (default s* and N, {defaults_secs:.2} s)",
+        ctx.describe()
+    );
+    if llvmpipe {
+        assert!(
+            heavy > 0,
+            "llvmpipe's loop cap went unreported in the walks"
+        );
+    } else {
+        assert_eq!(
+            (heavy, defaults),
+            (0, 0),
+            "a hardware driver cut walks short"
+        );
+    }
+}
+
 /// The reference path tracer on both backends with the same random
 /// numbers: the thin sphere and the puffs' voxel grid, 24², 16 passes.
 /// At least 97 % (90 % on hardware, `MIN_IDENTICAL_HARDWARE`) of the pixel

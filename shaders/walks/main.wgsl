@@ -18,11 +18,14 @@
 // Per light, `walk_out` holds `record_stride` vec4 (xyz used): `sh_count`
 // coefficients of `F`, `sh_count` of the multiply scattered part,
 // `sh_count` of what of it the walks carried through a collision,
-// `external_count` arriving lights, `n_terms + 1` term energies, then with
+// `external_count` arriving lights, `min(n_terms, GPU_MAX_GATES − 1) + 1`
+// term energies, then with
 // view walks one more: their mean collided part per unit chance towards
 // the eye (walks `K .. K + view_walks` of the light, all along
 // `normalize(eye − x)`; "Walks towards the eye" in
-// src/physics/internal/sources.rs). Keep
+// src/physics/internal/sources.rs). The first vec4's `w` counts the walks
+// of the light that the driver's loop cap cut short (`loops_cut_short`:
+// their terms are too small). Keep
 // `WalkParams` in sync with `GpuWalkParams` in src/gpu/mirrors.rs.
 
 // From Rust (the generated prelude, src/gpu/shaders.rs): the stream index
@@ -145,6 +148,9 @@ fn walk_lights(
         walk_collided_only = towards_eye;
         accumulate_j_from(x, n, settings, 1u, &walk_rng, &per_walk);
     }
+    // Asked once the walk is done (accumulate.wgsl): whether the driver
+    // ended its loops, counted in the record's first `w`.
+    let cut = (spread || towards_eye) && loops_cut_short(wp.light_count);
     var total = vec3<f32>(0.0);
     for (var k = 1u; k <= terms; k++) {
         total += per_walk[k];
@@ -198,14 +204,16 @@ fn walk_lights(
             } else if q < quantities {
                 v = view;
             }
-            partial[lane * ROUND + j] = vec4<f32>(v, 0.0);
+            partial[lane * ROUND + j] = vec4<f32>(v, select(0.0, 1.0, cut && q == 0u));
         }
         workgroupBarrier();
         let q = base + lane;
         if lane < ROUND && q < quantities {
             var sum = vec3<f32>(0.0);
+            var cut_walks = 0.0;
             for (var l = 0u; l < WALK_LANES; l++) {
                 sum += partial[l * ROUND + lane].xyz;
+                cut_walks += partial[l * ROUND + lane].w;
             }
             var slot = record + q;
             if q >= spread_quantities {
@@ -216,7 +224,7 @@ fn walk_lights(
             } else if q >= 3u * count {
                 slot = energy_at + 1u + (q - 3u * count);
             }
-            walk_out[slot] += vec4<f32>(sum, 0.0);
+            walk_out[slot] += vec4<f32>(sum, cut_walks);
         }
         workgroupBarrier();
     }

@@ -159,7 +159,9 @@ pub fn renewal_text(resample_every: u32, balanced: bool) -> String {
 }
 
 /// Warns if the GPU driver cut pixel passes short
-/// ([`GpuImage::cut_short_passes`](crate::gpu::GpuImage::cut_short_passes)):
+/// ([`GpuImage::cut_short_passes`](crate::gpu::GpuImage::cut_short_passes))
+/// or the internal lights' walks
+/// ([`GpuImage::cut_short_walks`](crate::gpu::GpuImage::cut_short_walks)):
 /// those samples are too dark, and `--backend cpu` has no such limit.
 pub fn warn_cut_short(image: &crate::gpu::GpuImage) {
     let cut = image.cut_short_passes();
@@ -171,6 +173,15 @@ pub fn warn_cut_short(image: &crate::gpu::GpuImage) {
              image is darker than it should be; render with --backend cpu, or with fewer \
              light samples or window scatterings",
             100.0 * cut as f64 / all.max(1) as f64
+        );
+    }
+    if image.cut_short_walks > 0 {
+        eprintln!(
+            "warning: the GPU driver cut {} of the internal lights' walks short: it caps the \
+             loop iterations of one shader invocation (Mesa's software driver does), so those \
+             lights are darker than they should be; render with --backend cpu, or with a \
+             smaller N (--terms)",
+            image.cut_short_walks
         );
     }
 }

@@ -372,5 +372,6 @@ pub fn read_accum(
         height,
         samples,
         pixels: pixels.into_iter().take(n).collect(),
+        cut_short_walks: 0,
     })
 }

@@ -139,14 +139,16 @@ impl GpuRenderer {
     ) -> Result<Self, GpuError> {
         let (buffers, bytes) = upload_lights(ctx, cache, light_samples)?;
         let [params, vec4, words] = &buffers;
-        Self::build(
+        let mut renderer = Self::build(
             ctx,
             prepared,
             seed,
             &GATHER_MODULE,
             &[(6, params), (7, vec4), (8, words)],
             bytes,
-        )
+        )?;
+        renderer.cut_short_walks = cache.cut_short_walks;
+        Ok(renderer)
     }
 
     /// Gathers the passes still to come from another set of internal
@@ -159,7 +161,9 @@ impl GpuRenderer {
     ) -> Result<(), GpuError> {
         let (buffers, bytes) = upload_lights(&self.ctx, cache, light_samples)?;
         let [params, vec4, words] = &buffers;
-        self.rebind_extra(&[(6, params), (7, vec4), (8, words)], bytes)
+        self.rebind_extra(&[(6, params), (7, vec4), (8, words)], bytes)?;
+        self.cut_short_walks += cache.cut_short_walks;
+        Ok(())
     }
 }
 

@@ -287,6 +287,10 @@ pub struct GpuImage {
     pub samples: u32,
     /// Per-pixel running statistics, rows top to bottom.
     pub pixels: Vec<GpuAccum>,
+    /// Internal lights' walks that the driver cut short, summed over the
+    /// light sets the passes were gathered from
+    /// ([`InternalLights::cut_short_walks`](crate::physics::internal::sources::InternalLights::cut_short_walks)).
+    pub cut_short_walks: u64,
 }
 
 impl GpuImage {
@@ -346,6 +350,8 @@ pub struct GpuRenderer {
     label: &'static str,
     /// Bytes of the `extra` buffers (counted in `buffers.bytes`).
     extra_bytes: u64,
+    /// Walks of the light sets gathered so far that the driver cut short.
+    pub(crate) cut_short_walks: u64,
 }
 
 /// The bind group of `pipeline`: the scene's buffers (bindings 0–4) and
@@ -441,6 +447,7 @@ impl GpuRenderer {
             samples: 0,
             label,
             extra_bytes,
+            cut_short_walks: 0,
         })
     }
 
@@ -551,6 +558,7 @@ impl GpuRenderer {
             height: self.height,
             samples: self.samples,
             pixels: pixels.into_iter().take(n).collect(),
+            cut_short_walks: self.cut_short_walks,
         })
     }
 }

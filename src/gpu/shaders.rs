@@ -390,7 +390,7 @@ pub const WALKS_MODULE: ModuleSource = ModuleSource {
     name: "walks",
     parts: &[
         RNG, FRAME, PHASE, SCENE, VOLUME, MAJORANT, TRACKING, LIGHTS, REFERENCE, SH, GATED_WALK,
-        WALKS_MAIN,
+        ACCUMULATE, WALKS_MAIN,
     ],
     entry_point: "walk_lights",
 };

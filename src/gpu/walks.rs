@@ -143,7 +143,9 @@ pub fn build_internal_lights_gpu(
     let gates = term_slots(params.terms);
     let v3 = |v: &[f32; 4]| Vec3::new(v[0], v[1], v[2]);
     let mut sources = LightSources::with_capacity(lights, count, n_ext, gates);
+    let mut cut_short_walks = 0u64;
     for record in out.chunks_exact(stride).take(m) {
+        cut_short_walks += record.first().map_or(0, |v| v[3] as u64);
         let (sh, rest) = record.split_at(3 * count);
         let (arrival, rest) = rest.split_at(n_ext);
         let (energy, view) = rest.split_at(gates);
@@ -175,6 +177,7 @@ pub fn build_internal_lights_gpu(
     );
     lights_out.timings.placement = t_place;
     lights_out.timings.walks = t_walk;
+    lights_out.cut_short_walks = cut_short_walks;
     Ok(lights_out)
 }
 

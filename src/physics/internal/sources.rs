@@ -323,6 +323,10 @@ pub struct InternalLights {
     pub density_integral: f32,
     /// How long the build took.
     pub timings: BuildTimings,
+    /// Walks whose loops the GPU driver ended before they did (Mesa's
+    /// software driver caps one invocation's loop iterations at 65 535 in
+    /// all): their light is missing. Zero on the CPU and on hardware GPUs.
+    pub cut_short_walks: u64,
     pub(crate) sh_order: u32,
     pub(crate) sh_count: usize,
     /// `F_i` SH coefficients, `sh_count` per light.
@@ -973,6 +977,7 @@ impl InternalLights {
             term_energy,
             density_integral,
             timings: BuildTimings::default(),
+            cut_short_walks: 0,
             sh_order: order,
             sh_count: count,
             f_coeffs,
