@@ -31,15 +31,16 @@ SPP_DIVISOR=${SPP_DIVISOR:-1}
 
 # Samples per pixel, chosen from 256-spp probes for a median per-pixel
 # relative standard error of the mean of about 1.2 % on the pixels brighter
-# than 5 % of the 99th percentile (reached: 1.1-1.7 %; the cumulus, whose
-# reference is heavy-tailed, 5.2 % where its probe promised 2.4 %). Seconds:
-# wall time on one core of the 2-core development machine, shared with
-# other work (the cumulus's 49152 spp were 21 min of CPU time).
+# than 5 % of the 99th percentile (reached: 1.1-1.7 %; the cumulus 1.8 %,
+# the thick sphere 0.9 %, re-rendered after the Russian roulette stopped
+# letting weights grow: with it the cumulus's reference had fireflies and
+# 5.2 %). Seconds: wall time on one core of the 2-core development machine,
+# shared with other work; the cumulus and the thick sphere on two threads.
 declare -A SPP=(
     [wispy_smoke]=32768            # 146 s
     [smoke_plume]=16384            # 185 s
-    [thick_cumulus]=49152          # 3084 s
-    [thick_sphere_front_lit]=24576 # 448 s
+    [thick_cumulus]=49152          # 1773 s (2 threads)
+    [thick_sphere_front_lit]=24576 # 509 s (2 threads)
     [chromatic]=49152              # 442 s
     [point_lit]=32768              # ~300 s
     [sky_lit_plume]=16384          # (issue 24: sun and clear sky)
