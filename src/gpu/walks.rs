@@ -184,8 +184,8 @@ pub fn build_internal_lights_gpu(
 /// The vec4 per light of the walks' output (see
 /// `shaders/walks/main.wgsl`): the three SH sets, the arrival from each of
 /// `n_ext` external lights, the energies of `k = 1..=N` after `E_0` (those
-/// past [`RESOLVED_TERMS`](crate::physics::internal::clock::RESOLVED_TERMS) summed in the last), and with view walks their
-/// value.
+/// past [`RESOLVED_TERMS`](crate::physics::internal::clock::RESOLVED_TERMS)
+/// summed in the last), and with view walks their value.
 fn record_stride(params: &InternalParams, n_ext: usize) -> u32 {
     let count = sh_count(params.sh_order.min(MAX_ORDER)) as u32;
     3 * count + n_ext as u32 + term_slots(params.terms) as u32 + u32::from(params.view_walks > 0)
