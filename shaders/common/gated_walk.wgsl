@@ -345,7 +345,7 @@ fn gate_add(
         return;
     }
     let scatter = scene.medium.albedo * scene.medium.sigma_t;
-    let source = single_scatter_source(zk, nk, rng);
+    let source = gate_scatter_source(zk, nk, rng);
     let v = w * scatter * rho * source;
     (*out)[min(k, GPU_MAX_GATES - 1u)] += v;
     if !scattered {

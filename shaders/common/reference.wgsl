@@ -52,6 +52,29 @@ fn single_scatter_source_at_rate(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr
     return sum;
 }
 
+// The walks' gates' `S₁(p, n) / b(p)` (`gate_scatter_source`): each light's
+// shadow ray traced with probability `q = min(1, P · GATE_PHASE_ROULETTE)`
+// (twice `P` over the isotropic phase function's value) and its term divided
+// by `q`; one number drawn before a light's shadow ray where `q < 1`.
+fn gate_scatter_source(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) -> vec3<f32> {
+    var sum = vec3<f32>(0.0);
+    let count = light_count();
+    for (var i = 0u; i < count; i++) {
+        let l = light_at(i, p);
+        let phase = hg(scene.medium.g, dot(l.travel, n));
+        let q = min(phase * GATE_PHASE_ROULETTE, 1.0);
+        if q < 1.0 && rng_next_f32(rng) >= q {
+            continue;
+        }
+        let tr = transmittance_at_rate(p, -l.travel, l.distance, 1.0, rng);
+        sum += l.irradiance * tr * (phase / q);
+    }
+    if env_present() {
+        sum += environment_source(p, n, 1.0, rng);
+    }
+    return sum;
+}
+
 // The environment's part of `S₁(p, n) / b(p)` by one-sample MIS between the
 // map and the phase function (`environment_source`).
 fn environment_source(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, Rng>) -> vec3<f32> {

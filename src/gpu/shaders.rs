@@ -212,6 +212,11 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
         F32,
         crate::physics::reference::RR_MAX_SURVIVAL
     ),
+    shared!(
+        "GATE_PHASE_ROULETTE",
+        F32,
+        crate::physics::reference::GATE_PHASE_ROULETTE
+    ),
     shared!("SH_MAX_ORDER", U32, crate::physics::sh::MAX_ORDER),
     shared!("SH_NORM", F32Array, &crate::physics::sh::NORM),
     shared!(

@@ -82,17 +82,76 @@ pub fn single_scatter_source_at_rate<D: DensityField>(
     rate: f32,
     rng: &mut Rng,
 ) -> Vec3 {
+    scatter_source(vol, lights, p, n, rate, None, rng)
+}
+
+/// [`single_scatter_source_at_rate`], each light's shadow ray traced with
+/// probability `q = min(1, P · c)` for `roulette` `Some(c)` (its term
+/// divided by `q`; one number drawn first where `q < 1`), every one for
+/// `None`.
+#[inline]
+fn scatter_source<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    p: Vec3,
+    n: Vec3,
+    rate: f32,
+    roulette: Option<f32>,
+    rng: &mut Rng,
+) -> Vec3 {
     let mut sum = Vec3::ZERO;
     lights.for_each_at(p, |l| {
         let phase = phase::hg(vol.optics.g, l.travel.dot(n));
+        let q = roulette.map_or(1.0, |c| (phase * c).min(1.0));
+        if q < 1.0 && rng.next_f32() >= q {
+            return;
+        }
         let tr = transmittance_at_rate(vol, p, -l.travel, l.distance, rate, rng);
-        sum += l.irradiance * tr * phase;
+        sum += l.irradiance * tr * (phase / q);
     });
     if let Some(env) = lights.sky() {
         sum += environment_source(vol, env, p, n, rate, rng);
     }
     sum
 }
+
+/// The walks' gates' `S₁(p, n) / b(p)` ([`single_scatter_source`]'s
+/// estimate with its shadow rays rouletted by the phase function): each
+/// external light's shadow ray is traced with probability
+/// `q = min(1, 2 P(n·ω)/P_iso)` ([`GATE_PHASE_ROULETTE`]), `P_iso = 1/4π`
+/// the isotropic phase function's value, and its term divided by `q`; the environment's part is
+/// [`environment_source`]'s. Unbiased, the same expectation as
+/// [`single_scatter_source`].
+///
+/// Why: a walk adds `S₁` at every gate, twice per mean free path at the
+/// default window, and in a forward-scattering medium most gates face their
+/// lights at angles where `P` is a small fraction of its mean (for `g`
+/// 0.85 and directions spread evenly, the ray is traced at 41 % of the
+/// gates, for a second moment of `P` 0.1 % higher); the gates' shadow rays
+/// took about a third of a light set's time in a thick cloud. The
+/// gather's marches and the reference keep every shadow ray: there one
+/// sample carries the pixel's single scatter, not one of hundreds of gates.
+/// Draws one number before a light's shadow ray where `q < 1`.
+#[inline]
+pub fn gate_scatter_source<D: DensityField>(
+    vol: &Volume<D>,
+    lights: &Lights,
+    p: Vec3,
+    n: Vec3,
+    rng: &mut Rng,
+) -> Vec3 {
+    scatter_source(vol, lights, p, n, 1.0, Some(GATE_PHASE_ROULETTE), rng)
+}
+
+/// `2/P_iso = 8π`: [`gate_scatter_source`] traces a light's shadow ray
+/// with probability `min(1, P · GATE_PHASE_ROULETTE)`, so that only the
+/// directions where the phase function is below half the isotropic one's
+/// value are rouletted. For directions spread evenly that is 1 % of them
+/// at `g` 0.3 (a second moment of `P` 0.3 % higher), 16 % at 0.5 (1.1 %)
+/// and 59 % at 0.85 (0.1 %). At `2π` (every direction below twice the
+/// isotropic value) the suite's smoke plume (`g` 0.3) had a quarter more
+/// light-set variance.
+pub const GATE_PHASE_ROULETTE: f32 = 8.0 * std::f32::consts::PI;
 
 /// One estimate of the environment's part of `S₁(p, n) / b(p)`,
 /// `∫ P(n·ω) L(−ω) T(p, ∞ along −ω) dω` over the directions `ω` light
@@ -221,6 +280,80 @@ pub fn radiance_split<D: DensityField>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The gates' rouletted `S₁` ([`gate_scatter_source`]) has
+    /// [`single_scatter_source`]'s mean: in a heterogeneous medium of `g`
+    /// 0.85 lit by a sun and a point light, at points and directions that
+    /// face the lights at every angle (so that `q` ranges from 1 to a few
+    /// percent), 40 000 estimates of each on independent streams agree
+    /// within 4.5 standard errors per channel; and the roulette skips
+    /// shadow rays (it draws fewer numbers on the whole).
+    #[test]
+    fn gate_roulette_keeps_the_mean() {
+        use crate::physics::lights::{PointLight, Sun};
+        use crate::physics::testing::{boxed, mean_and_its_variance};
+        let mut vol = boxed(1.2, 0.8, 0.95, 2.0, 4);
+        vol.optics.g = 0.85;
+        let lights = Lights {
+            suns: vec![Sun {
+                direction: Vec3::new(0.6, -1.0, -0.5).normalize(),
+                irradiance: Vec3::new(3.0, 2.0, 1.0),
+            }],
+            points: vec![PointLight {
+                position: Vec3::new(-1.5, 0.5, 1.0),
+                intensity: Vec3::new(2.0, 2.0, 4.0),
+            }],
+            environment: None,
+        };
+        let mut checked = 0;
+        for (i, cos) in [-1.0f32, -0.3, 0.2, 0.6, 0.9, 0.99].into_iter().enumerate() {
+            // A direction at `cos` to the sun's travel direction.
+            let t = lights.suns[0].direction;
+            let side = t.any_orthonormal_vector();
+            let n = (t * cos + side * (1.0 - cos * cos).max(0.0).sqrt()).normalize();
+            let p = Vec3::new(0.1 * i as f32 - 0.2, -0.3, 0.15);
+            let count = 40_000;
+            let (full, full_var) = mean_and_its_variance(count, 5, i as u32, |rng| {
+                single_scatter_source(&vol, &lights, p, n, rng)
+            });
+            let (gated, gated_var) = mean_and_its_variance(count, 6, i as u32, |rng| {
+                gate_scatter_source(&vol, &lights, p, n, rng)
+            });
+            for c in 0..3 {
+                let z = (gated[c] - full[c]) / (full_var[c] + gated_var[c]).sqrt();
+                assert!(
+                    z.abs() < 4.5,
+                    "cos {cos}, channel {c}: rouletted {} against {} (z = {z})",
+                    gated[c],
+                    full[c]
+                );
+            }
+            checked += 1;
+        }
+        assert_eq!(checked, 6);
+        // Backwards from the sun (`q` ≈ 0.09 for it; the point light stands
+        // elsewhere) most of the sun's shadow rays are skipped: the
+        // rouletted estimate is mostly exactly zero where ratio tracking
+        // seldom is.
+        let t = lights.suns[0].direction;
+        let sun_only = Lights {
+            points: Vec::new(),
+            ..lights.clone()
+        };
+        // Near the face the sun enters by: ratio tracking seldom reaches zero.
+        let p = Vec3::new(-0.2, 1.8, 0.1);
+        let zeros = |f: &dyn Fn(&mut Rng) -> Vec3| {
+            (0..2000u32)
+                .filter(|&w| f(&mut Rng::for_sample(9, w, 0)) == Vec3::ZERO)
+                .count()
+        };
+        let full = zeros(&|rng| single_scatter_source(&vol, &sun_only, p, -t, rng));
+        let gated = zeros(&|rng| gate_scatter_source(&vol, &sun_only, p, -t, rng));
+        assert!(
+            full < 20 && gated > 1700,
+            "zero estimates: {gated} of 2000 rouletted, {full} of 2000 in full"
+        );
+    }
 
     /// In a grey medium of albedo up to 0.999 the roulette keeps every
     /// survivor at weight one (no weight grows with the path's length, the

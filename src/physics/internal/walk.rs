@@ -39,7 +39,7 @@ use super::clock::{march_clock, Clock, ClockLattice, ClockMarch, ClockRay, GateS
 use super::guiding::{guided_direction, GUIDED_COLLISIONS};
 use crate::physics::lights::Lights;
 use crate::physics::phase;
-use crate::physics::reference::{roulette, single_scatter_source};
+use crate::physics::reference::{gate_scatter_source, roulette};
 use crate::physics::rng::Rng;
 use crate::physics::tracking::{free_flight, spectral_event, TentativeEvent, TentativeSteps};
 use crate::physics::volume::{DensityField, Volume};
@@ -205,7 +205,7 @@ impl<'a, D: DensityField> Walks<'a, D> {
                 if rho <= 0.0 {
                     return;
                 }
-                let source = single_scatter_source(vol, lights, zk, nk, rng);
+                let source = gate_scatter_source(vol, lights, zk, nk, rng);
                 add(k, w * scatter * rho * source, scattered);
             },
             None,
@@ -739,8 +739,12 @@ mod tests {
                     if k == 0 || wt == Vec3::ZERO {
                         return;
                     }
-                    let s =
-                        (wt * scatter * single_scatter_source(&vol, &lights, zk, nk, rng)).x as f64;
+                    let s = (wt
+                        * scatter
+                        * crate::physics::reference::single_scatter_source(
+                            &vol, &lights, zk, nk, rng,
+                        ))
+                    .x as f64;
                     v[0] += s;
                     if k > 256 {
                         v[1] += s;
