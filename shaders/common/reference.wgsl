@@ -38,39 +38,35 @@ fn single_scatter_source(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) ->
 // `single_scatter_source` with the shadow rays' ratio tracking at `rate`
 // times the majorant (`single_scatter_source_at_rate`).
 fn single_scatter_source_at_rate(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, Rng>) -> vec3<f32> {
-    var sum = vec3<f32>(0.0);
-    let count = light_count();
-    for (var i = 0u; i < count; i++) {
-        let l = light_at(i, p);
-        let phase = hg(scene.medium.g, dot(l.travel, n));
-        let tr = transmittance_at_rate(p, -l.travel, l.distance, rate, rng);
-        sum += l.irradiance * tr * phase;
-    }
-    if env_present() {
-        sum += environment_source(p, n, rate, rng);
-    }
-    return sum;
+    return scatter_source(p, n, rate, 0.0, rng);
 }
 
 // The walks' gates' `S₁(p, n) / b(p)` (`gate_scatter_source`): each light's
 // shadow ray traced with probability `q = min(1, P · GATE_PHASE_ROULETTE)`
 // (twice `P` over the isotropic phase function's value) and its term divided
-// by `q`; one number drawn before a light's shadow ray where `q < 1`.
+// by `q`.
 fn gate_scatter_source(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) -> vec3<f32> {
+    return scatter_source(p, n, 1.0, GATE_PHASE_ROULETTE, rng);
+}
+
+// `single_scatter_source_at_rate` with each light's shadow ray traced with
+// probability `q = min(1, P · roulette)` (its term divided by `q`; one number
+// drawn first where `q < 1`), every one for `roulette` 0 (`scatter_source`).
+fn scatter_source(p: vec3<f32>, n: vec3<f32>, rate: f32, roulette: f32, rng: ptr<function, Rng>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
     let count = light_count();
     for (var i = 0u; i < count; i++) {
         let l = light_at(i, p);
         let phase = hg(scene.medium.g, dot(l.travel, n));
-        let q = min(phase * GATE_PHASE_ROULETTE, 1.0);
+        let q = select(1.0, min(phase * roulette, 1.0), roulette > 0.0);
         if q < 1.0 && rng_next_f32(rng) >= q {
             continue;
         }
-        let tr = transmittance_at_rate(p, -l.travel, l.distance, 1.0, rng);
+        let tr = transmittance_at_rate(p, -l.travel, l.distance, rate, rng);
         sum += l.irradiance * tr * (phase / q);
     }
     if env_present() {
-        sum += environment_source(p, n, 1.0, rng);
+        sum += environment_source(p, n, rate, rng);
     }
     return sum;
 }

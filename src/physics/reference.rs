@@ -119,8 +119,8 @@ fn scatter_source<D: DensityField>(
 /// estimate with its shadow rays rouletted by the phase function): each
 /// external light's shadow ray is traced with probability
 /// `q = min(1, 2 P(n·ω)/P_iso)` ([`GATE_PHASE_ROULETTE`]), `P_iso = 1/4π`
-/// the isotropic phase function's value, and its term divided by `q`; the environment's part is
-/// [`environment_source`]'s. Unbiased, the same expectation as
+/// the isotropic phase function's value, and its term divided by `q`; the
+/// environment's part is [`environment_source`]'s. Unbiased, the same expectation as
 /// [`single_scatter_source`].
 ///
 /// Why: a walk adds `S₁` at every gate, twice per mean free path at the
@@ -287,7 +287,8 @@ mod tests {
     /// face the lights at every angle (so that `q` ranges from 1 to a few
     /// percent), 40 000 estimates of each on independent streams agree
     /// within 4.5 standard errors per channel; and the roulette skips
-    /// shadow rays (it draws fewer numbers on the whole).
+    /// shadow rays (backwards from the sun, near its face, the rouletted
+    /// estimate is mostly exactly zero where the full one almost never is).
     #[test]
     fn gate_roulette_keeps_the_mean() {
         use crate::physics::lights::{PointLight, Sun};
