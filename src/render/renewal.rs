@@ -63,7 +63,8 @@ pub struct RenewalEstimates {
     /// Per-pixel variance a set adds to each of its passes (may read
     /// slightly negative where it is small next to `pass_variance`).
     pub set_variance: f64,
-    /// Seconds per pass (the set's build not included).
+    /// Seconds per pass (the set's build and the render's first pass
+    /// not included: [`BalancedRenewal::add_pass`]).
     pub pass_secs: f64,
     /// Seconds per set's build.
     pub set_secs: f64,
@@ -135,8 +136,10 @@ pub struct BalancedRenewal {
     inverse_lengths: f64,
     /// `Σ n_s²` over the complete sets.
     square_lengths: f64,
-    /// Time spent in passes and in builds, and their counts.
+    /// Time spent in passes and in builds, and their counts: every pass
+    /// but the render's first is timed ([`BalancedRenewal::add_pass`]).
     pass_secs: f64,
+    timed_passes: u32,
     passes: u32,
     build_secs: f64,
     builds: u32,
@@ -171,6 +174,7 @@ impl BalancedRenewal {
             inverse_lengths: 0.0,
             square_lengths: 0.0,
             pass_secs: 0.0,
+            timed_passes: 0,
             passes: 0,
             build_secs: 0.0,
             builds: 0,
@@ -193,23 +197,34 @@ impl BalancedRenewal {
 
     /// Adds one pass of the current set: its image (one value per pixel)
     /// and the seconds it took.
+    ///
+    /// The render's first pass counts for the noise but not for the time:
+    /// it holds what only a first pass pays. A GPU driver may compile the
+    /// pipeline at its first dispatch (lavapipe with a cold shader cache:
+    /// 11 s for the thick cumulus's first pass at 32², 0.12–0.16 s for each
+    /// after it), and a mean pass time ten times too long turned the
+    /// schedule's decisions around (`b d/(a c)` 0.3 against 4 with the
+    /// cache warm).
     pub fn add_pass(&mut self, image: &[Vec3], secs: f64) {
         for ((s, q), v) in self.sum.iter_mut().zip(&mut self.squares).zip(image) {
             let x = f64::from(v.x + v.y + v.z) / 3.0;
             *s += x;
             *q += x * x;
         }
-        self.passes_in_set += 1;
-        self.pass_secs += secs;
-        self.passes += 1;
+        self.add_pass_secs(secs);
     }
 
     /// Adds one pass of the current set whose image is accumulated
     /// elsewhere (on the GPU), and the seconds it took: the set's per-pixel
     /// sums come at its end from [`BalancedRenewal::replace_set_sums`].
+    /// As in [`BalancedRenewal::add_pass`], the render's first pass is not
+    /// timed.
     pub fn add_pass_secs(&mut self, secs: f64) {
+        if self.passes > 0 {
+            self.pass_secs += secs;
+            self.timed_passes += 1;
+        }
         self.passes_in_set += 1;
-        self.pass_secs += secs;
         self.passes += 1;
     }
 
@@ -383,7 +398,7 @@ impl BalancedRenewal {
         if self.sets < sets.max(2)
             || self.within_dof <= 0.0
             || self.builds == 0
-            || self.passes == 0
+            || self.timed_passes == 0
             || self.sum.is_empty()
         {
             return None;
@@ -400,7 +415,7 @@ impl BalancedRenewal {
         Some(RenewalEstimates {
             pass_variance: a,
             set_variance: spread - a * self.inverse_lengths / k,
-            pass_secs: self.pass_secs / f64::from(self.passes),
+            pass_secs: self.pass_secs / f64::from(self.timed_passes),
             set_secs: self.build_secs / f64::from(self.builds),
         })
     }
@@ -455,6 +470,45 @@ mod tests {
             renewal.add_pass(&image, c);
         }
         (renewal, periods)
+    }
+
+    /// A first pass that took 100× the others (a driver compiling its
+    /// pipeline at the first dispatch) does not count for the pass time,
+    /// for passes given as images or as times: it is counted as a pass,
+    /// untimed, and the estimates read the other passes' time (0.1 s; a
+    /// timed first pass would make it 0.595 s).
+    #[test]
+    fn the_first_pass_is_not_timed() {
+        let image = [Vec3::ONE; 4];
+        let mut by_images = BalancedRenewal::new(4, 2);
+        let mut by_times = BalancedRenewal::new(4, 2);
+        for r in [&mut by_images, &mut by_times] {
+            r.add_set_build(1.0);
+        }
+        by_images.add_pass(&image, 10.0);
+        by_times.add_pass_secs(10.0);
+        for r in [&mut by_images, &mut by_times] {
+            assert_eq!(r.timed_passes, 0);
+        }
+        for pass in 1..20 {
+            if by_images.next_starts_set() {
+                by_images.add_set_build(1.0);
+            }
+            // Passes of one set differ, so that the spread within sets is
+            // measured.
+            let x = if pass % 2 == 0 { 1.0 } else { 2.0 };
+            by_images.add_pass(&[Vec3::splat(x); 4], 0.1);
+            if by_times.next_starts_set() {
+                by_times.add_set_build(1.0);
+            }
+            by_times.add_pass_secs(0.1);
+            by_times.replace_set_sums(&[(3.0, 5.0); 4]);
+        }
+        for r in [&by_images, &by_times] {
+            let e = r.estimates().expect("estimates after ten sets");
+            assert!((e.pass_secs - 0.1).abs() < 1e-9, "{e:?}");
+            assert_eq!(r.passes, 20);
+        }
     }
 
     /// Passes made of a per-pixel set effect of variance `b`, shared by a
