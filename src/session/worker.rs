@@ -1151,6 +1151,8 @@ impl JobContext<'_> {
         } else {
             1.0
         };
+        let full_samples = job.scene.render.internal.expert.light_samples;
+        let samples = preview_light_samples(full_samples, light_share);
         let t = Instant::now();
         let mut small = job.scene.clone();
         small.camera.width = (width / factor).max(1);
@@ -1181,8 +1183,7 @@ impl JobContext<'_> {
                 let mut streams = Vec::new();
                 for &estimator in &job.estimators {
                     let mut settings = settings_for(job, estimator);
-                    let expert = &mut settings.internal.expert;
-                    expert.light_samples = preview_light_samples(expert.light_samples, light_share);
+                    settings.internal.expert.light_samples = samples;
                     let cached = if estimator == Method::Internal {
                         lights.clone()
                     } else {
@@ -1215,9 +1216,8 @@ impl JobContext<'_> {
             .iter()
             .map(|&e| {
                 let pixels = f64::from(small.camera.width) * f64::from(small.camera.height);
-                let full = job.scene.render.internal.expert.light_samples;
                 let share = if e == Method::Internal {
-                    f64::from(preview_light_samples(full, light_share)) / f64::from(full.max(1))
+                    f64::from(samples) / f64::from(full_samples.max(1))
                 } else {
                     1.0
                 };
@@ -1240,10 +1240,7 @@ impl JobContext<'_> {
             },
         );
         trace(
-            &format!(
-                "preview (1/{factor} of the size, {} light samples)",
-                preview_light_samples(job.scene.render.internal.expert.light_samples, light_share)
-            ),
+            &format!("preview (1/{factor} of the size, {samples} light samples)"),
             t,
         );
         self.newer()
