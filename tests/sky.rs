@@ -407,7 +407,7 @@ fn internal_lights_s1_holds_the_sky() {
                 env,
                 light.position,
                 n,
-                1.0,
+                lantern::physics::tracking::Transmittance::RATIO,
                 &mut rng,
             ) * scatter
                 * light.density

@@ -13,7 +13,7 @@ use super::environment::Environment;
 use super::lights::Lights;
 use super::phase;
 use super::rng::Rng;
-use super::tracking::{free_flight, transmittance_at_rate};
+use super::tracking::{free_flight, Transmittance};
 use super::volume::{DensityField, Volume};
 
 /// Collisions after which Russian roulette starts.
@@ -68,24 +68,24 @@ pub fn single_scatter_source<D: DensityField>(
     n: Vec3,
     rng: &mut Rng,
 ) -> Vec3 {
-    single_scatter_source_at_rate(vol, lights, p, n, 1.0, rng)
+    single_scatter_source_with(vol, lights, p, n, Transmittance::RATIO, rng)
 }
 
-/// [`single_scatter_source`] with the shadow rays' ratio tracking at
-/// `rate` times the majorant ([`transmittance_at_rate`]).
+/// [`single_scatter_source`] with the shadow rays' transmittance
+/// estimated by `tr` (the gather's: [`Transmittance::Marched`]).
 #[inline]
-pub fn single_scatter_source_at_rate<D: DensityField>(
+pub fn single_scatter_source_with<D: DensityField>(
     vol: &Volume<D>,
     lights: &Lights,
     p: Vec3,
     n: Vec3,
-    rate: f32,
+    tr: Transmittance,
     rng: &mut Rng,
 ) -> Vec3 {
-    scatter_source(vol, lights, p, n, rate, None, rng)
+    scatter_source(vol, lights, p, n, tr, None, rng)
 }
 
-/// [`single_scatter_source_at_rate`], each light's shadow ray traced with
+/// [`single_scatter_source_with`], each light's shadow ray traced with
 /// probability `q = min(1, P · c)` for `roulette` `Some(c)` (its term
 /// divided by `q`; one number drawn first where `q < 1`), every one for
 /// `None`.
@@ -95,7 +95,7 @@ fn scatter_source<D: DensityField>(
     lights: &Lights,
     p: Vec3,
     n: Vec3,
-    rate: f32,
+    estimator: Transmittance,
     roulette: Option<f32>,
     rng: &mut Rng,
 ) -> Vec3 {
@@ -106,11 +106,11 @@ fn scatter_source<D: DensityField>(
         if q < 1.0 && rng.next_f32() >= q {
             return;
         }
-        let tr = transmittance_at_rate(vol, p, -l.travel, l.distance, rate, rng);
+        let tr = estimator.estimate(vol, p, -l.travel, l.distance, rng);
         sum += l.irradiance * tr * (phase / q);
     });
     if let Some(env) = lights.sky() {
-        sum += environment_source(vol, env, p, n, rate, rng);
+        sum += environment_source(vol, env, p, n, estimator, rng);
     }
     sum
 }
@@ -140,7 +140,15 @@ pub fn gate_scatter_source<D: DensityField>(
     n: Vec3,
     rng: &mut Rng,
 ) -> Vec3 {
-    scatter_source(vol, lights, p, n, 1.0, Some(GATE_PHASE_ROULETTE), rng)
+    scatter_source(
+        vol,
+        lights,
+        p,
+        n,
+        Transmittance::RATIO,
+        Some(GATE_PHASE_ROULETTE),
+        rng,
+    )
 }
 
 /// `2/P_iso = 8π`: [`gate_scatter_source`] traces a light's shadow ray
@@ -158,15 +166,15 @@ pub const GATE_PHASE_ROULETTE: f32 = 8.0 * std::f32::consts::PI;
 /// travels: a direction from the environment with probability
 /// [`Environment::map_share`] `q`, from the phase function otherwise, and
 /// `P L T / (q p_env + (1 − q) P)` (one-sample MIS with the balance
-/// heuristic), the transmittance ratio-tracked at `rate` times the
-/// majorant. Draws three numbers from `rng` before tracking.
+/// heuristic), the transmittance estimated by `tr`. Draws three numbers
+/// from `rng` before the transmittance.
 #[inline]
 pub fn environment_source<D: DensityField>(
     vol: &Volume<D>,
     env: &Environment,
     p: Vec3,
     n: Vec3,
-    rate: f32,
+    tr: Transmittance,
     rng: &mut Rng,
 ) -> Vec3 {
     let g = vol.optics.g;
@@ -195,7 +203,7 @@ pub fn environment_source<D: DensityField>(
     if radiance == Vec3::ZERO {
         return Vec3::ZERO;
     }
-    radiance * (phase / pdf) * transmittance_at_rate(vol, p, from, f32::INFINITY, rate, rng)
+    radiance * (phase / pdf) * tr.estimate(vol, p, from, f32::INFINITY, rng)
 }
 
 /// The sky seen behind the medium by a ray travelling along `dir`, with

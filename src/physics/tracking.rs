@@ -286,22 +286,274 @@ pub fn transmittance_at_rate<D: DensityField>(
         |t, m, rng| {
             let sigma_t = vol.sigma_t(origin + dir * t);
             tr *= (Vec3::ONE - sigma_t / m).max(Vec3::ZERO);
-            let largest = tr.max_element();
-            if largest <= 0.0 {
-                return false;
-            }
-            if largest < 0.1 {
-                // Russian roulette: survive with probability 1/2, doubled.
-                if rng.next_f32() < 0.5 {
-                    tr = Vec3::ZERO;
-                    return false;
-                }
-                tr *= 2.0;
-            }
-            true
+            roulette_small(&mut tr, rng)
         },
     );
     tr
+}
+
+/// Russian roulette on a running transmittance estimate `tr`: once its
+/// largest channel (in magnitude) is below 0.1 it survives with
+/// probability 1/2 and is doubled. Returns `false`, with `tr` zero, where
+/// it was dropped or carries nothing (or is not a number).
+#[inline]
+fn roulette_small(tr: &mut Vec3, rng: &mut Rng) -> bool {
+    let largest = tr.abs().max_element();
+    if largest.is_nan() || largest <= 0.0 {
+        *tr = Vec3::ZERO;
+        return false;
+    }
+    if largest < 0.1 {
+        if rng.next_f32() < 0.5 {
+            *tr = Vec3::ZERO;
+            return false;
+        }
+        *tr *= 2.0;
+    }
+    true
+}
+
+/// Majorant optical depth of one segment of [`transmittance_marched`]
+/// (at most; the ray's is split evenly): each segment's estimate is
+/// independent of the others', and the running product is rouletted
+/// between segments once it is small, so that a march into a thick
+/// medium stops about where ratio tracking would.
+pub const MARCH_SEGMENT_DEPTH: f32 = 4.0;
+
+/// Majorant optical depth between the points of one march of
+/// [`transmittance_marched`] (at most; each segment is split evenly).
+pub const MARCH_STRIDE_DEPTH: f32 = 0.5;
+
+/// Longest series [`transmittance_marched`] sums in one segment: a bound
+/// on the work of a segment, never reached in practice (the terms after
+/// the first are rouletted by their size, and the `k`-th is divided by
+/// `k!`).
+pub const MARCH_MAX_TERMS: u32 = 32;
+
+/// One jittered march of the optical depth `∫ σ_t dt` over `[ta, tb]`
+/// (per channel): points `stride` apart in majorant optical depth from a
+/// uniform random offset, at most `depth` of it (the stretch's majorant
+/// optical depth). Unbiased: each point stands for the stride it falls
+/// in.
+#[inline]
+fn march_depth<D: DensityField>(
+    vol: &Volume<D>,
+    origin: Vec3,
+    dir: Vec3,
+    (ta, tb): (f32, f32),
+    (stride, depth): (f32, f32),
+    rng: &mut Rng,
+) -> Vec3 {
+    let mut x = Vec3::ZERO;
+    let mut next = rng.next_f32() * stride;
+    let mut s = 0.0f32;
+    vol.majorants.walk(origin, dir, ta, tb, |a, b, m| {
+        if m <= 0.0 {
+            return true;
+        }
+        let sb = s + m * (b - a);
+        let lim = sb.min(depth);
+        while next < lim {
+            x += vol.sigma_t(origin + dir * (a + (next - s) / m)) / m;
+            next += stride;
+        }
+        s = sb;
+        next < depth
+    });
+    x * stride
+}
+
+/// The transmittance of one segment `span` from two independent marches
+/// of its optical depth, `x0` and `x1`: `e^{−τ} = e^{−x0} e^{x0 − τ}`, the
+/// second factor by its power series `Σ_k Π_{j≤k} (x0 − x_j) / k!` with
+/// each factor from a march of its own (so that, given `x0`, its
+/// expectation is `x0 − τ`). The first term is always taken; each later
+/// one with probability `min(1, 4 |term|)` (and divided by it). Unbiased
+/// given `x0`, hence unbiased.
+#[inline]
+fn close_segment<D: DensityField>(
+    vol: &Volume<D>,
+    origin: Vec3,
+    dir: Vec3,
+    span: (f32, f32),
+    march: (f32, f32),
+    (x0, x1): (Vec3, Vec3),
+    rng: &mut Rng,
+) -> Vec3 {
+    let mut term = x0 - x1;
+    let mut sum = Vec3::ONE + term;
+    for k in 2..MARCH_MAX_TERMS {
+        let p = (term.abs().max_element() * 4.0).min(1.0);
+        if p <= 0.0 || rng.next_f32() >= p {
+            break;
+        }
+        let xk = march_depth(vol, origin, dir, span, march, rng);
+        term *= (x0 - xk) / (k as f32 * p);
+        sum += term;
+    }
+    (-x0).exp() * sum
+}
+
+/// An unbiased ray-marched estimate of the transmittance from `origin`
+/// along `dir` up to distance `t_max` (clipped to the medium), per
+/// channel, in the manner of Kettunen et al. 2021 ("An unbiased
+/// ray-marching transmittance estimator"; [method §6](crate::doc::method)).
+///
+/// The ray is cut into segments of majorant optical depth about
+/// [`MARCH_SEGMENT_DEPTH`]. In each, two jittered marches estimate its
+/// optical depth (points [`MARCH_STRIDE_DEPTH`] of majorant depth apart:
+/// about two density lookups per majorant mean free path each), and a
+/// rouletted power series about the first turns them into an unbiased
+/// transmittance (the series of [method §6.1](crate::doc::method)). Where the density varies little
+/// over a stride, the marches agree and the estimate is nearly exact,
+/// where ratio tracking's relative variance grows with the optical depth
+/// (`e^{τ/rate} − 1`). The estimate can fall below zero or above one;
+/// its expectation is the transmittance. The running product is
+/// rouletted as ratio tracking's is once below 0.1.
+///
+/// Bounded as tracking is: two passes over the majorant grid's cells, the
+/// marches' points a fixed majorant depth apart, counted from each
+/// segment's start (so they never stall on the spacing of `f32` values).
+pub fn transmittance_marched<D: DensityField>(
+    vol: &Volume<D>,
+    origin: Vec3,
+    dir: Vec3,
+    t_max: f32,
+    rng: &mut Rng,
+) -> Vec3 {
+    if !(origin.is_finite() && dir.is_finite() && !t_max.is_nan()) {
+        NON_FINITE.fetch_add(1, Ordering::Relaxed);
+        return Vec3::ONE;
+    }
+    let Some((t0, t1)) = vol.clip(origin, dir) else {
+        return Vec3::ONE;
+    };
+    let t1 = t1.min(t_max);
+    if t1 <= t0 {
+        return Vec3::ONE;
+    }
+    let mut total = 0.0f32;
+    vol.majorants.walk(origin, dir, t0, t1, |a, b, m| {
+        total += m * (b - a);
+        true
+    });
+    if !(total > 0.0 && total.is_finite()) {
+        if !total.is_finite() {
+            NON_FINITE.fetch_add(1, Ordering::Relaxed);
+        }
+        return Vec3::ONE;
+    }
+    let segments = (total / MARCH_SEGMENT_DEPTH).ceil().max(1.0);
+    let depth = total / segments;
+    let stride = depth / (depth / MARCH_STRIDE_DEPTH).ceil().max(1.0);
+    let segments = segments as u64;
+
+    let mut tr = Vec3::ONE;
+    let mut closed = 0u64;
+    // The segment's start, and the two marches' sums and next points
+    // (majorant depth from the segment's start).
+    let mut seg_t = t0;
+    let mut x = [Vec3::ZERO; 2];
+    let mut next = [rng.next_f32() * stride, rng.next_f32() * stride];
+    // Majorant depth from the segment's start to the cell's entry.
+    let mut s = 0.0f32;
+    let alive = vol.majorants.walk(origin, dir, t0, t1, |a, b, m| {
+        if m <= 0.0 {
+            return true;
+        }
+        let mut sb = s + m * (b - a);
+        loop {
+            let lim = sb.min(depth);
+            for (xj, nj) in x.iter_mut().zip(next.iter_mut()) {
+                while *nj < lim {
+                    *xj += vol.sigma_t(origin + dir * (a + (*nj - s) / m)) / m;
+                    *nj += stride;
+                }
+            }
+            if closed + 1 >= segments || sb < depth {
+                break;
+            }
+            let t_end = (a + (depth - s) / m).clamp(seg_t, b);
+            tr *= close_segment(
+                vol,
+                origin,
+                dir,
+                (seg_t, t_end),
+                (stride, depth),
+                (x[0] * stride, x[1] * stride),
+                rng,
+            );
+            closed += 1;
+            if !roulette_small(&mut tr, rng) {
+                return false;
+            }
+            seg_t = t_end;
+            s -= depth;
+            sb -= depth;
+            x = [Vec3::ZERO; 2];
+            next = [rng.next_f32() * stride, rng.next_f32() * stride];
+        }
+        s = sb;
+        true
+    });
+    if !alive {
+        return tr;
+    }
+    tr * close_segment(
+        vol,
+        origin,
+        dir,
+        (seg_t, t1),
+        (stride, depth),
+        (x[0] * stride, x[1] * stride),
+        rng,
+    )
+}
+
+/// How a transmittance is estimated: the choice that the estimators pass
+/// down to every shadow ray and view segment they trace.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Transmittance {
+    /// Ratio tracking with tentative collisions at this many times the
+    /// majorant ([`transmittance_at_rate`]; 1 is plain ratio tracking).
+    Ratio(f32),
+    /// The unbiased ray march ([`transmittance_marched`]).
+    Marched,
+}
+
+impl Transmittance {
+    /// Plain ratio tracking: what the reference path tracer and the walks
+    /// use.
+    pub const RATIO: Self = Self::Ratio(1.0);
+
+    /// How the WGSL names this choice to `transmittance_by`: the rate for
+    /// ratio tracking, `0` (`TRANSMITTANCE_MARCHED`) for the march.
+    pub const fn wgsl_rate(self) -> f32 {
+        match self {
+            // Ratio tracking below the majorant's rate is ratio tracking
+            // at it (`transmittance_at_rate`), never the march's tag.
+            Self::Ratio(rate) if rate >= 1.0 => rate,
+            Self::Ratio(_) => 1.0,
+            Self::Marched => 0.0,
+        }
+    }
+
+    /// One estimate of the transmittance from `origin` along `dir` up to
+    /// distance `t_max` (clipped to the medium), per channel.
+    #[inline]
+    pub fn estimate<D: DensityField>(
+        self,
+        vol: &Volume<D>,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        rng: &mut Rng,
+    ) -> Vec3 {
+        match self {
+            Self::Ratio(rate) => transmittance_at_rate(vol, origin, dir, t_max, rate, rng),
+            Self::Marched => transmittance_marched(vol, origin, dir, t_max, rng),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -390,6 +642,135 @@ mod tests {
         // e^{1/4} − 1 = 0.28.
         assert!(rel_var[0] > 5.0, "rate 1: relative variance {}", rel_var[0]);
         assert!(rel_var[1] < 0.4, "rate 8: relative variance {}", rel_var[1]);
+    }
+
+    /// The mean and the relative variance of `n` estimates by `f`.
+    fn moments(n: u32, seed: u64, mut f: impl FnMut(&mut Rng) -> Vec3) -> (Vec3, Vec3, Vec3) {
+        let (mut sum, mut sum2) = (Vec3::ZERO.as_dvec3(), Vec3::ZERO.as_dvec3());
+        for i in 0..n {
+            let mut rng = Rng::for_sample(seed, i, 0);
+            let v = f(&mut rng).as_dvec3();
+            sum += v;
+            sum2 += v * v;
+        }
+        let mean = sum / n as f64;
+        let var = (sum2 / n as f64 - mean * mean).max(glam::DVec3::ZERO);
+        let stderr = (var / n as f64).powf(0.5);
+        (
+            mean.as_vec3(),
+            stderr.as_vec3(),
+            (var / (mean * mean)).as_vec3(),
+        )
+    }
+
+    /// The ray march through a homogeneous sphere matches `exp(−σ L)` per
+    /// channel on chords of several lengths, with a small fraction of
+    /// ratio tracking's variance at 8 times the majorant (which is
+    /// `e^{τ/8} − 1`: 1.1 on the blue channel's diameter, τ = 6). Exact
+    /// through the centre, where the majorant is tight along the whole
+    /// chord; off it the chord's ends share majorant cells with empty
+    /// space (measured 0.14–0.18 of ratio tracking's).
+    #[test]
+    fn marched_transmittance_matches_beer_lambert_with_little_variance() {
+        let sigma = Vec3::new(0.5, 1.5, 3.0);
+        let vol = ball(sigma);
+        for (i, offset) in [0.0f32, 0.4, 0.8].into_iter().enumerate() {
+            let origin = Vec3::new(-2.0, offset, 0.0);
+            let chord = 2.0 * (1.0 - offset * offset).sqrt();
+            let exact = (-sigma * chord).exp();
+            let (mean, stderr, rel_var) = moments(50_000, 11 + i as u64, |rng| {
+                transmittance_marched(&vol, origin, Vec3::X, f32::INFINITY, rng)
+            });
+            let (_, _, ratio_rel_var) = moments(50_000, 21 + i as u64, |rng| {
+                transmittance_at_rate(&vol, origin, Vec3::X, f32::INFINITY, 8.0, rng)
+            });
+            for c in 0..3 {
+                assert!(
+                    (mean[c] - exact[c]).abs() < 4.0 * stderr[c] + 1e-5,
+                    "offset {offset} ch {c}: {} vs {} (stderr {})",
+                    mean[c],
+                    exact[c],
+                    stderr[c]
+                );
+                assert!(
+                    rel_var[c] < 0.25 * ratio_rel_var[c],
+                    "offset {offset} ch {c}: relative variance {} against ratio tracking's {}",
+                    rel_var[c],
+                    ratio_rel_var[c]
+                );
+            }
+        }
+    }
+
+    /// Through a heterogeneous medium over several segments (majorant
+    /// depth 7.15: two segments, Russian roulette between them), up to
+    /// `t_max`, the march is unbiased against the analytic optical depth of
+    /// `base + amp sin x sin y`, with under 1 % of the variance of ratio
+    /// tracking at 8 times the majorant (measured: 1.2e-4 against 6.2,
+    /// relative; ratio tracking's includes its Russian roulette).
+    #[test]
+    fn marched_transmittance_is_unbiased_over_segments_of_a_varying_medium() {
+        let (base, amp) = (0.3f32, 0.25f32);
+        let vol = crate::physics::testing::boxed(base, amp, 1.0, 10.0, 16);
+        let y = 0.7f32;
+        let origin = Vec3::new(-10.0, y, 0.2);
+        let length = 13.0f32;
+        let tau = base as f64 * length as f64
+            + amp as f64 * (y as f64).sin() * ((-10.0f64).cos() - 3.0f64.cos());
+        let exact = (-tau).exp() as f32;
+        let (mean, stderr, rel_var) = moments(100_000, 5, |rng| {
+            transmittance_marched(&vol, origin, Vec3::X, length, rng)
+        });
+        let (_, _, ratio_rel_var) = moments(100_000, 6, |rng| {
+            transmittance_at_rate(&vol, origin, Vec3::X, length, 8.0, rng)
+        });
+        assert!(
+            (mean.x - exact).abs() < 4.0 * stderr.x,
+            "{} vs {exact} (stderr {})",
+            mean.x,
+            stderr.x
+        );
+        assert!(
+            rel_var.x < 0.01 * ratio_rel_var.x,
+            "relative variance {} against ratio tracking's {}",
+            rel_var.x,
+            ratio_rel_var.x
+        );
+    }
+
+    /// The march refuses a ray that is not finite (and counts it), and
+    /// through empty space under a majorant of 10⁶ seen from 10⁷ away —
+    /// two million majorant mean free paths, where the segments are
+    /// shorter than the spacing of `f32` distances — it ends, with all the
+    /// light.
+    #[test]
+    fn marched_transmittance_ends_and_refuses_non_finite_rays() {
+        let before = non_finite_flights();
+        let vol = ball(Vec3::ONE);
+        let mut rng = Rng::for_sample(0, 0, 0);
+        let t = transmittance_marched(&vol, Vec3::new(f32::NAN, 0.0, 0.0), Vec3::X, 1.0, &mut rng);
+        assert_eq!(t, Vec3::ONE);
+        assert!(non_finite_flights() > before);
+        let tr = within_10_s(|| {
+            let vol = Volume::new(
+                EmptyUnderDenseMajorant,
+                Optics {
+                    sigma_t: Vec3::ONE,
+                    albedo: Vec3::ONE,
+                    g: 0.0,
+                },
+                4,
+            );
+            let mut rng = Rng::for_sample(1, 2, 3);
+            transmittance_marched(
+                &vol,
+                Vec3::new(-1e7, 0.1, 0.2),
+                Vec3::X,
+                f32::INFINITY,
+                &mut rng,
+            )
+        });
+        assert_eq!(tr, Vec3::ONE);
     }
 
     /// Empty space under a majorant of 10⁶: the null collisions that a

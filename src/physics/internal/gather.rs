@@ -71,24 +71,22 @@ use super::segment_pdf::SegmentPdf;
 use super::sources::{InternalLights, L1Form, Part};
 use crate::physics::lights::Lights;
 use crate::physics::phase;
-use crate::physics::reference::{background, single_scatter_source_at_rate};
+use crate::physics::reference::{background, single_scatter_source_with};
 use crate::physics::rng::Rng;
-use crate::physics::tracking::transmittance_at_rate;
+use crate::physics::tracking::Transmittance;
 use crate::physics::volume::{DensityField, Volume};
 
-/// The gather's ratio tracking (every transmittance it estimates: to the
-/// window's points, the shadow rays of `S₁`, `L₁`'s segments) samples
-/// tentative collisions at this many times the majorant
-/// ([`transmittance_at_rate`]). The majorant grid is tight in the puffs'
-/// cores, where ratio tracking at rate 1 degenerates to a yes-or-no
-/// estimate. Measured with `lantern noise` (puffs 256², M 16384, K 16,
-/// SH order 4, `s*` 0.5): at 8 points per ray the per-pass noise of the
-/// gather fell from 31.4 % to 20.6 % of the image mean (single scatter
-/// 12.2 → 4.0 %) for 13 % more time per pass, 2.05× less variance per
-/// second; at 2 points per ray 73.1 → 55.6 % for 18 % more, 1.46×. The
-/// walks keep rate 1: their noise is their paths' ([validation](crate::doc::validation)
-/// §4, "Tried and not kept").
-pub const TRACKING_RATE: f32 = 8.0;
+/// How the gather estimates every transmittance (to the window's points,
+/// the shadow rays of `S₁`, `L₁`'s segments): the unbiased ray march
+/// ([`crate::physics::tracking::transmittance_marched`]). Ratio tracking
+/// at 8 times the majorant came before it (itself 2.05× less variance per
+/// second than plain ratio tracking on the puffs, where a tight majorant
+/// makes ratio tracking a yes-or-no estimate); against it the march cut
+/// the gather's variance × time 14–20 % on the plume, the chromatic and
+/// the point-lit scenes ([validation](crate::doc::validation) §3.11).
+/// The walks keep plain ratio tracking: their noise is their paths'
+/// ([validation](crate::doc::validation) §4, "Tried and not kept").
+pub const GATHER_TRANSMITTANCE: Transmittance = Transmittance::Marched;
 
 /// The most stratified points per camera ray ([`gather`]'s `samples`;
 /// the scene's `light_samples` is validated against it): the settings'
@@ -166,11 +164,11 @@ fn single_beyond_window<D: DensityField>(
         }
         let s1 = cache.scatter
             * rho
-            * single_scatter_source_at_rate(vol, lights, y, n, TRACKING_RATE, rng);
+            * single_scatter_source_with(vol, lights, y, n, GATHER_TRANSMITTANCE, rng);
         if s1 == Vec3::ZERO {
             continue;
         }
-        sum += transmittance_at_rate(vol, x, dir, t, TRACKING_RATE, rng) * s1 * step;
+        sum += GATHER_TRANSMITTANCE.estimate(vol, x, dir, t, rng) * s1 * step;
     }
     sum
 }
@@ -222,7 +220,7 @@ pub fn gather<D: DensityField>(
     let len = t_out - t_in;
     if sky != Vec3::ZERO {
         // The sky behind the medium, through all of it.
-        out.single = sky * transmittance_at_rate(vol, x, dir, len, TRACKING_RATE, rng);
+        out.single = sky * GATHER_TRANSMITTANCE.estimate(vol, x, dir, len, rng);
     }
     let s_star = cache.s_star;
     let clock = cache.params.clock;
@@ -281,7 +279,7 @@ pub fn gather<D: DensityField>(
         let (s1, l1) = if rho > 0.0 {
             let s1 = cache.scatter
                 * rho
-                * single_scatter_source_at_rate(vol, lights, y, n, TRACKING_RATE, rng);
+                * single_scatter_source_with(vol, lights, y, n, GATHER_TRANSMITTANCE, rng);
             let l1 = if field {
                 let at = WindowPoint {
                     position: y,
@@ -299,7 +297,7 @@ pub fn gather<D: DensityField>(
         if j_hat == Vec3::ZERO && l1 == Vec3::ZERO && s1 == Vec3::ZERO {
             continue;
         }
-        let tr = transmittance_at_rate(vol, x, dir, t, TRACKING_RATE, rng);
+        let tr = GATHER_TRANSMITTANCE.estimate(vol, x, dir, t, rng);
         out.reconstructed += tr * j_hat * step;
         out.internal += tr * l1 * step;
         out.single += tr * s1 * step;
@@ -418,8 +416,8 @@ pub fn gather<D: DensityField>(
         if j == Vec3::ZERO {
             continue;
         }
-        let tr = transmittance_at_rate(vol, x, dir, t, TRACKING_RATE, rng)
-            * transmittance_at_rate(vol, y, -n_light, r, TRACKING_RATE, rng);
+        let tr = GATHER_TRANSMITTANCE.estimate(vol, x, dir, t, rng)
+            * GATHER_TRANSMITTANCE.estimate(vol, y, -n_light, r, rng);
         if tr == Vec3::ZERO {
             continue;
         }
@@ -531,7 +529,7 @@ fn field_l1_at<D: DensityField>(
         if rho > 0.0 {
             j += cache.scatter
                 * rho
-                * single_scatter_source_at_rate(vol, lights, xp, travel, TRACKING_RATE, rng);
+                * single_scatter_source_with(vol, lights, xp, travel, GATHER_TRANSMITTANCE, rng);
         }
         let more = scattering < scatters && rho > 0.0;
         if j == Vec3::ZERO && !more {
@@ -539,7 +537,7 @@ fn field_l1_at<D: DensityField>(
         }
         throughput *= cache.scatter
             * rho_point
-            * transmittance_at_rate(vol, point, back, r, TRACKING_RATE, rng)
+            * GATHER_TRANSMITTANCE.estimate(vol, point, back, r, rng)
             * inv_pdf;
         sum += throughput * j;
         if !more || throughput == Vec3::ZERO {
