@@ -312,7 +312,7 @@ fn close_segment(
 }
 
 // The unbiased ray-marched transmittance (`transmittance_marched`): the ray
-// cut into segments of majorant optical depth about `MARCH_SEGMENT_DEPTH`,
+// cut into segments of majorant optical depth `MARCH_SEGMENT_DEPTH`,
 // two jittered marches per segment closed by `close_segment`, the running
 // product rouletted once below 0.1. Counts majorant depth from each
 // segment's start, as the CPU does.
@@ -330,7 +330,11 @@ fn transmittance_marched(
     if !(t1 > clip.t0) {
         return vec3<f32>(1.0);
     }
+    // One segment of the ray's own depth where it holds at most
+    // `MARCH_SEGMENT_DEPTH`, else segments of exactly that, the last cut
+    // short; the first walk stops once the ray is known to be long.
     var total = 0.0;
+    var short = true;
     var pre = dda_start(origin, dir, clip.t0, t1);
     loop {
         let seg = dda_next(&pre);
@@ -338,17 +342,24 @@ fn transmittance_marched(
             break;
         }
         total += seg.majorant * (seg.t1 - seg.t0);
+        if total > MARCH_SEGMENT_DEPTH {
+            short = false;
+            break;
+        }
     }
-    if !(total > 0.0 && total < BIG) {
+    if !(total < BIG) {
         return vec3<f32>(1.0);
     }
-    let segments_f = max(ceil(total / MARCH_SEGMENT_DEPTH), 1.0);
-    let depth = total / segments_f;
+    var depth = MARCH_SEGMENT_DEPTH;
+    if short {
+        if total <= 0.0 {
+            return vec3<f32>(1.0);
+        }
+        depth = total;
+    }
     let stride = depth / max(ceil(depth / MARCH_STRIDE_DEPTH), 1.0);
-    let segments = u32(min(segments_f, 4.0e9));
 
     var tr = vec3<f32>(1.0);
-    var closed = 0u;
     var seg_t = clip.t0;
     var x0 = vec3<f32>(0.0);
     var x1 = vec3<f32>(0.0);
@@ -370,20 +381,27 @@ fn transmittance_marched(
         var sb = s + m * (seg.t1 - a);
         loop {
             let lim = min(sb, depth);
-            while n0 < lim {
-                x0 += medium_sigma_t(origin + dir * (a + (n0 - s) / m)) / m;
-                n0 += stride;
+            // Both marches' points in order in one loop (two loops in a
+            // row leave more of a SIMD group idle).
+            loop {
+                let n = min(n0, n1);
+                if n >= lim {
+                    break;
+                }
+                let v = medium_sigma_t(origin + dir * (a + (n - s) / m)) / m;
+                if n0 <= n1 {
+                    x0 += v;
+                    n0 += stride;
+                } else {
+                    x1 += v;
+                    n1 += stride;
+                }
             }
-            while n1 < lim {
-                x1 += medium_sigma_t(origin + dir * (a + (n1 - s) / m)) / m;
-                n1 += stride;
-            }
-            if closed + 1u >= segments || sb < depth {
+            if short || sb < depth {
                 break;
             }
             let t_end = clamp(a + (depth - s) / m, seg_t, seg.t1);
             tr *= close_segment(origin, dir, seg_t, t_end, stride, depth, x0 * stride, x1 * stride, rng);
-            closed += 1u;
             if !roulette_small(&tr, rng) {
                 alive = false;
                 break;

@@ -314,14 +314,15 @@ fn roulette_small(tr: &mut Vec3, rng: &mut Rng) -> bool {
 }
 
 /// Majorant optical depth of one segment of [`transmittance_marched`]
-/// (at most; the ray's is split evenly): each segment's estimate is
-/// independent of the others', and the running product is rouletted
-/// between segments once it is small, so that a march into a thick
-/// medium stops about where ratio tracking would.
+/// (a ray that holds less is one segment of its own depth): each
+/// segment's estimate is independent of the others', and the running
+/// product is rouletted between segments once it is small, so that a
+/// march into a thick medium stops about where ratio tracking would.
 pub const MARCH_SEGMENT_DEPTH: f32 = 4.0;
 
 /// Majorant optical depth between the points of one march of
-/// [`transmittance_marched`] (at most; each segment is split evenly).
+/// [`transmittance_marched`] (at most: a segment is split evenly; it
+/// divides [`MARCH_SEGMENT_DEPTH`]).
 pub const MARCH_STRIDE_DEPTH: f32 = 0.5;
 
 /// Longest series [`transmittance_marched`] sums in one segment: a bound
@@ -399,8 +400,8 @@ fn close_segment<D: DensityField>(
 /// channel, in the manner of Kettunen et al. 2021 ("An unbiased
 /// ray-marching transmittance estimator"; [method §6](crate::doc::method)).
 ///
-/// The ray is cut into segments of majorant optical depth about
-/// [`MARCH_SEGMENT_DEPTH`]. In each, two jittered marches estimate its
+/// The ray is cut into segments of majorant optical depth
+/// [`MARCH_SEGMENT_DEPTH`] (one segment, if it holds less). In each, two jittered marches estimate its
 /// optical depth (points [`MARCH_STRIDE_DEPTH`] of majorant depth apart:
 /// about two density lookups per majorant mean free path each), and a
 /// rouletted power series about the first turns them into an unbiased
@@ -411,9 +412,10 @@ fn close_segment<D: DensityField>(
 /// its expectation is the transmittance. The running product is
 /// rouletted as ratio tracking's is once below 0.1.
 ///
-/// Bounded as tracking is: two passes over the majorant grid's cells, the
-/// marches' points a fixed majorant depth apart, counted from each
-/// segment's start (so they never stall on the spacing of `f32` values).
+/// Bounded as tracking is: a pass over the majorant grid's cells (and a
+/// first one over at most a segment's worth), the marches' points a
+/// fixed majorant depth apart, counted from each segment's start (so
+/// they never stall on the spacing of `f32` values).
 pub fn transmittance_marched<D: DensityField>(
     vol: &Volume<D>,
     origin: Vec3,
@@ -432,24 +434,33 @@ pub fn transmittance_marched<D: DensityField>(
     if t1 <= t0 {
         return Vec3::ONE;
     }
+    // A ray of at most one segment's majorant depth is marched as one
+    // segment, its strides split evenly; a longer one in segments of
+    // exactly `MARCH_SEGMENT_DEPTH`, the last cut short where the ray
+    // ends (each march then drops the points past the end: still
+    // unbiased). The first walk stops as soon as the ray is known to be
+    // long, so that a shadow ray into a thick cloud, which the roulette
+    // ends early, is not walked to its end twice.
     let mut total = 0.0f32;
-    vol.majorants.walk(origin, dir, t0, t1, |a, b, m| {
+    let short = vol.majorants.walk(origin, dir, t0, t1, |a, b, m| {
         total += m * (b - a);
-        true
+        total <= MARCH_SEGMENT_DEPTH
     });
-    if !(total > 0.0 && total.is_finite()) {
-        if !total.is_finite() {
-            NON_FINITE.fetch_add(1, Ordering::Relaxed);
-        }
+    if !total.is_finite() {
+        NON_FINITE.fetch_add(1, Ordering::Relaxed);
         return Vec3::ONE;
     }
-    let segments = (total / MARCH_SEGMENT_DEPTH).ceil().max(1.0);
-    let depth = total / segments;
-    let stride = depth / (depth / MARCH_STRIDE_DEPTH).ceil().max(1.0);
-    let segments = segments as u64;
+    let (depth, stride) = if short {
+        if total <= 0.0 {
+            return Vec3::ONE;
+        }
+        (total, total / (total / MARCH_STRIDE_DEPTH).ceil().max(1.0))
+    } else {
+        let depth = MARCH_SEGMENT_DEPTH;
+        (depth, depth / (depth / MARCH_STRIDE_DEPTH).ceil().max(1.0))
+    };
 
     let mut tr = Vec3::ONE;
-    let mut closed = 0u64;
     // The segment's start, and the two marches' sums and next points
     // (majorant depth from the segment's start).
     let mut seg_t = t0;
@@ -470,7 +481,7 @@ pub fn transmittance_marched<D: DensityField>(
                     *nj += stride;
                 }
             }
-            if closed + 1 >= segments || sb < depth {
+            if short || sb < depth {
                 break;
             }
             let t_end = (a + (depth - s) / m).clamp(seg_t, b);
@@ -483,7 +494,6 @@ pub fn transmittance_marched<D: DensityField>(
                 (x[0] * stride, x[1] * stride),
                 rng,
             );
-            closed += 1;
             if !roulette_small(&mut tr, rng) {
                 return false;
             }
