@@ -32,13 +32,12 @@ fn roulette(weight: ptr<function, vec3<f32>>, rng: ptr<function, Rng>) -> bool {
 // coefficient at `p` towards `n`, transmittance by ratio tracking
 // (`single_scatter_source`).
 fn single_scatter_source(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) -> vec3<f32> {
-    return single_scatter_source_with(p, n, 1.0, rng);
+    return single_scatter_source_at_rate(p, n, 1.0, rng);
 }
 
-// `single_scatter_source` with the shadow rays' transmittance by
-// `transmittance_by` at `rate` (`single_scatter_source_with`; the gather
-// passes `GATHER_TRANSMITTANCE`, the march).
-fn single_scatter_source_with(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, Rng>) -> vec3<f32> {
+// `single_scatter_source` with the shadow rays' ratio tracking at `rate`
+// times the majorant (`single_scatter_source_at_rate`).
+fn single_scatter_source_at_rate(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, Rng>) -> vec3<f32> {
     return scatter_source(p, n, rate, 0.0, rng);
 }
 
@@ -50,7 +49,7 @@ fn gate_scatter_source(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) -> v
     return scatter_source(p, n, 1.0, GATE_PHASE_ROULETTE, rng);
 }
 
-// `single_scatter_source_with` with each light's shadow ray traced with
+// `single_scatter_source_at_rate` with each light's shadow ray traced with
 // probability `q = min(1, P · roulette)` (its term divided by `q`; one number
 // drawn first where `q < 1`), every one for `roulette` 0 (`scatter_source`).
 fn scatter_source(p: vec3<f32>, n: vec3<f32>, rate: f32, roulette: f32, rng: ptr<function, Rng>) -> vec3<f32> {
@@ -63,7 +62,7 @@ fn scatter_source(p: vec3<f32>, n: vec3<f32>, rate: f32, roulette: f32, rng: ptr
         if q < 1.0 && rng_next_f32(rng) >= q {
             continue;
         }
-        let tr = transmittance_by(p, -l.travel, l.distance, rate, rng);
+        let tr = transmittance_at_rate(p, -l.travel, l.distance, rate, rng);
         sum += l.irradiance * tr * (phase / q);
     }
     if env_present() {
@@ -102,7 +101,7 @@ fn environment_source(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, 
     if all(radiance == vec3<f32>(0.0)) {
         return vec3<f32>(0.0);
     }
-    return radiance * (phase / pdf) * transmittance_by(p, towards, BIG, rate, rng);
+    return radiance * (phase / pdf) * transmittance_at_rate(p, towards, BIG, rate, rng);
 }
 
 // A radiance estimate and its single-scattering part.

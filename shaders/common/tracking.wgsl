@@ -9,12 +9,6 @@
 // - `free_flight`: spectral tracking (Kutz et al. 2017, "max" probabilities).
 // - `transmittance`: ratio tracking (Novák et al. 2014) with Russian
 //   roulette once the estimate is small.
-// - `transmittance_marched`: the unbiased ray march (Kettunen et al. 2021)
-//   that the gather uses; `transmittance_by` picks one of the two as the
-//   Rust `Transmittance` does (a rate of `TRANSMITTANCE_MARCHED` is the
-//   march). Its constants come from Rust (the generated prelude:
-//   crate::physics::tracking::{MARCH_SEGMENT_DEPTH, MARCH_STRIDE_DEPTH,
-//   MARCH_MAX_TERMS}).
 // Every tentative collision advances the ray by at least one f32 step
 // (`tentative_advance`), as on the CPU, so no flight can stall.
 
@@ -201,226 +195,18 @@ fn transmittance_at_rate(
         }
         let sigma_t = medium_sigma_t(origin + dir * c.t);
         tr *= max(vec3<f32>(1.0) - sigma_t / c.majorant, vec3<f32>(0.0));
-        if !roulette_small(&tr, rng) {
+        let largest = max_element(tr);
+        if largest <= 0.0 {
             break;
+        }
+        if largest < 0.1 {
+            // Russian roulette: survive with probability 1/2, doubled.
+            if rng_next_f32(rng) < 0.5 {
+                tr = vec3<f32>(0.0);
+                break;
+            }
+            tr *= 2.0;
         }
     }
     return tr;
-}
-
-// Russian roulette on a running transmittance estimate (`roulette_small`):
-// once its largest channel in magnitude is below 0.1 it survives with
-// probability 1/2, doubled; `false`, with `tr` zero, where it was dropped
-// or carries nothing.
-fn roulette_small(tr: ptr<function, vec3<f32>>, rng: ptr<function, Rng>) -> bool {
-    let largest = max_element(abs(*tr));
-    if !(largest > 0.0) {
-        *tr = vec3<f32>(0.0);
-        return false;
-    }
-    if largest < 0.1 {
-        if rng_next_f32(rng) < 0.5 {
-            *tr = vec3<f32>(0.0);
-            return false;
-        }
-        *tr *= 2.0;
-    }
-    return true;
-}
-
-// The transmittance by ratio tracking at `rate` times the majorant, or by
-// the unbiased ray march where `rate` is `TRANSMITTANCE_MARCHED`
-// (`Transmittance::estimate`).
-fn transmittance_by(
-    origin: vec3<f32>,
-    dir: vec3<f32>,
-    t_max: f32,
-    rate: f32,
-    rng: ptr<function, Rng>,
-) -> vec3<f32> {
-    if rate == TRANSMITTANCE_MARCHED {
-        return transmittance_marched(origin, dir, t_max, rng);
-    }
-    return transmittance_at_rate(origin, dir, t_max, rate, rng);
-}
-
-// One jittered march of the optical depth over `[ta, tb]` (`march_depth`):
-// points `stride` apart in majorant optical depth from a uniform random
-// offset, at most `depth` of it.
-fn march_depth(
-    origin: vec3<f32>,
-    dir: vec3<f32>,
-    ta: f32,
-    tb: f32,
-    stride: f32,
-    depth: f32,
-    rng: ptr<function, Rng>,
-) -> vec3<f32> {
-    var x = vec3<f32>(0.0);
-    var next = rng_next_f32(rng) * stride;
-    var s = 0.0;
-    var dda = dda_start(origin, dir, ta, tb);
-    loop {
-        let seg = dda_next(&dda);
-        if !seg.valid {
-            break;
-        }
-        let m = seg.majorant;
-        if m <= 0.0 {
-            continue;
-        }
-        let sb = s + m * (seg.t1 - seg.t0);
-        let lim = min(sb, depth);
-        while next < lim {
-            x += medium_sigma_t(origin + dir * (seg.t0 + (next - s) / m)) / m;
-            next += stride;
-        }
-        s = sb;
-        if next >= depth {
-            break;
-        }
-    }
-    return x * stride;
-}
-
-// One segment's transmittance from two marches of its optical depth
-// (`close_segment`): `e^{−x0}` times the rouletted power series of
-// `e^{x0 − τ}`, each factor from a march of its own.
-fn close_segment(
-    origin: vec3<f32>,
-    dir: vec3<f32>,
-    ta: f32,
-    tb: f32,
-    stride: f32,
-    depth: f32,
-    x0: vec3<f32>,
-    x1: vec3<f32>,
-    rng: ptr<function, Rng>,
-) -> vec3<f32> {
-    var term = x0 - x1;
-    var sum = vec3<f32>(1.0) + term;
-    for (var k = 2u; k < MARCH_MAX_TERMS; k++) {
-        let p = min(max_element(abs(term)) * 4.0, 1.0);
-        if !(p > 0.0) || rng_next_f32(rng) >= p {
-            break;
-        }
-        let xk = march_depth(origin, dir, ta, tb, stride, depth, rng);
-        term *= (x0 - xk) / (f32(k) * p);
-        sum += term;
-    }
-    return exp(-x0) * sum;
-}
-
-// The unbiased ray-marched transmittance (`transmittance_marched`): the ray
-// cut into segments of majorant optical depth `MARCH_SEGMENT_DEPTH`,
-// two jittered marches per segment closed by `close_segment`, the running
-// product rouletted once below 0.1. Counts majorant depth from each
-// segment's start, as the CPU does.
-fn transmittance_marched(
-    origin: vec3<f32>,
-    dir: vec3<f32>,
-    t_max: f32,
-    rng: ptr<function, Rng>,
-) -> vec3<f32> {
-    let clip = medium_clip(origin, dir);
-    if !clip.hit {
-        return vec3<f32>(1.0);
-    }
-    let t1 = min(clip.t1, t_max);
-    if !(t1 > clip.t0) {
-        return vec3<f32>(1.0);
-    }
-    // One segment of the ray's own depth where it holds at most
-    // `MARCH_SEGMENT_DEPTH`, else segments of exactly that, the last cut
-    // short; the first walk stops once the ray is known to be long.
-    var total = 0.0;
-    var short = true;
-    var pre = dda_start(origin, dir, clip.t0, t1);
-    loop {
-        let seg = dda_next(&pre);
-        if !seg.valid {
-            break;
-        }
-        total += seg.majorant * (seg.t1 - seg.t0);
-        if total > MARCH_SEGMENT_DEPTH {
-            short = false;
-            break;
-        }
-    }
-    if !(total < BIG) {
-        return vec3<f32>(1.0);
-    }
-    var depth = MARCH_SEGMENT_DEPTH;
-    if short {
-        if total <= 0.0 {
-            return vec3<f32>(1.0);
-        }
-        depth = total;
-    }
-    let stride = depth / max(ceil(depth / MARCH_STRIDE_DEPTH), 1.0);
-
-    var tr = vec3<f32>(1.0);
-    var seg_t = clip.t0;
-    var x0 = vec3<f32>(0.0);
-    var x1 = vec3<f32>(0.0);
-    var n0 = rng_next_f32(rng) * stride;
-    var n1 = rng_next_f32(rng) * stride;
-    var s = 0.0;
-    var alive = true;
-    var dda = dda_start(origin, dir, clip.t0, t1);
-    loop {
-        let seg = dda_next(&dda);
-        if !seg.valid {
-            break;
-        }
-        let m = seg.majorant;
-        if m <= 0.0 {
-            continue;
-        }
-        let a = seg.t0;
-        var sb = s + m * (seg.t1 - a);
-        loop {
-            let lim = min(sb, depth);
-            // Both marches' points in order in one loop (two loops in a
-            // row leave more of a SIMD group idle).
-            loop {
-                let n = min(n0, n1);
-                if n >= lim {
-                    break;
-                }
-                let v = medium_sigma_t(origin + dir * (a + (n - s) / m)) / m;
-                if n0 <= n1 {
-                    x0 += v;
-                    n0 += stride;
-                } else {
-                    x1 += v;
-                    n1 += stride;
-                }
-            }
-            if short || sb < depth {
-                break;
-            }
-            let t_end = clamp(a + (depth - s) / m, seg_t, seg.t1);
-            tr *= close_segment(origin, dir, seg_t, t_end, stride, depth, x0 * stride, x1 * stride, rng);
-            if !roulette_small(&tr, rng) {
-                alive = false;
-                break;
-            }
-            seg_t = t_end;
-            s -= depth;
-            sb -= depth;
-            x0 = vec3<f32>(0.0);
-            x1 = vec3<f32>(0.0);
-            n0 = rng_next_f32(rng) * stride;
-            n1 = rng_next_f32(rng) * stride;
-        }
-        if !alive {
-            break;
-        }
-        s = sb;
-    }
-    if !alive {
-        return tr;
-    }
-    return tr * close_segment(origin, dir, seg_t, t1, stride, depth, x0 * stride, x1 * stride, rng);
 }

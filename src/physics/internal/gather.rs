@@ -88,6 +88,16 @@ use crate::physics::volume::{DensityField, Volume};
 /// ([validation](crate::doc::validation) §4, "Tried and not kept").
 pub const GATHER_TRANSMITTANCE: Transmittance = Transmittance::Marched;
 
+/// The GPU backend's gather still ratio-tracks every transmittance at
+/// this many times the majorant (the WGSL `TRACKING_RATE`): the march,
+/// inlined at each of the gather shader's dozen transmittance calls,
+/// made the GPU tests' process on Mesa's software Vulkan driver
+/// (lavapipe) grow to 24 GB with two tests at once, and it was killed
+/// for memory ([validation](crate::doc::validation) §3.11). Both
+/// estimators are unbiased, so the backends agree in the mean; the GPU's
+/// transmittances are the noisier.
+pub const TRACKING_RATE: f32 = 8.0;
+
 /// The most stratified points per camera ray ([`gather`]'s `samples`;
 /// the scene's `light_samples` is validated against it): the settings'
 /// bound, defined with them so that the scene layer needs nothing of this
