@@ -267,13 +267,9 @@ pub fn transmittance_at_rate<D: DensityField>(
     rate: f32,
     rng: &mut Rng,
 ) -> Vec3 {
-    let Some((t0, t1)) = vol.clip(origin, dir) else {
+    let Some((t0, t1)) = in_medium(vol, origin, dir, t_max) else {
         return Vec3::ONE;
     };
-    let t1 = t1.min(t_max);
-    if t1 <= t0 {
-        return Vec3::ONE;
-    }
     let mut tr = Vec3::ONE;
     let rate = rate.max(1.0);
     sample_tentative_at_rate(
@@ -290,6 +286,21 @@ pub fn transmittance_at_rate<D: DensityField>(
         },
     );
     tr
+}
+
+/// The stretch `[t0, t1]` of the ray `origin + t dir`, `t ≤ t_max`, inside
+/// the medium's box, if it is not empty: what every transmittance
+/// estimate integrates over.
+#[inline]
+fn in_medium<D: DensityField>(
+    vol: &Volume<D>,
+    origin: Vec3,
+    dir: Vec3,
+    t_max: f32,
+) -> Option<(f32, f32)> {
+    let (t0, t1) = vol.clip(origin, dir)?;
+    let t1 = t1.min(t_max);
+    (t1 > t0).then_some((t0, t1))
 }
 
 /// Russian roulette on a running transmittance estimate `tr`: once its
@@ -427,13 +438,9 @@ pub fn transmittance_marched<D: DensityField>(
         NON_FINITE.fetch_add(1, Ordering::Relaxed);
         return Vec3::ONE;
     }
-    let Some((t0, t1)) = vol.clip(origin, dir) else {
+    let Some((t0, t1)) = in_medium(vol, origin, dir, t_max) else {
         return Vec3::ONE;
     };
-    let t1 = t1.min(t_max);
-    if t1 <= t0 {
-        return Vec3::ONE;
-    }
     // A ray of at most one segment's majorant depth is marched as one
     // segment, its strides split evenly; a longer one in segments of
     // exactly `MARCH_SEGMENT_DEPTH`, the last cut short where the ray
