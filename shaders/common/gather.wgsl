@@ -34,10 +34,10 @@
 // extinction at its ends and `τ_l` by the trapezoid rule, mixed with the
 // uniform share `SEGMENT_DEFENSIVE` (optical-depth clock); uniform within a
 // piece.
-// The gather's ratio tracking samples tentative collisions at
-// `TRACKING_RATE` times the majorant. It and `SEGMENT_PIECES`,
+// The gather estimates every transmittance as `GATHER_TRANSMITTANCE` says
+// (`transmittance_by`: the unbiased ray march). It and `SEGMENT_PIECES`,
 // `SEGMENT_DEFENSIVE` come from Rust (the generated prelude:
-// crate::physics::gather::TRACKING_RATE,
+// crate::physics::gather::GATHER_TRANSMITTANCE,
 // crate::physics::segment_pdf::{PIECES, DEFENSIVE}).
 
 struct SegmentPdf {
@@ -177,11 +177,11 @@ fn single_beyond_window(
         if rho <= 0.0 {
             continue;
         }
-        let s1 = gather_params.scatter * rho * single_scatter_source_at_rate(y, n, TRACKING_RATE, rng);
+        let s1 = gather_params.scatter * rho * single_scatter_source_with(y, n, GATHER_TRANSMITTANCE, rng);
         if all(s1 == vec3<f32>(0.0)) {
             continue;
         }
-        sum += transmittance_at_rate(x, dir, t, TRACKING_RATE, rng) * s1 * step;
+        sum += transmittance_by(x, dir, t, GATHER_TRANSMITTANCE, rng) * s1 * step;
     }
     return sum;
 }
@@ -200,7 +200,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     let len = clip.t1 - clip.t0;
     if any(sky != vec3<f32>(0.0)) {
         // The sky behind the medium, through all of it.
-        out.single = sky * transmittance_at_rate(x, dir, len, TRACKING_RATE, rng);
+        out.single = sky * transmittance_by(x, dir, len, GATHER_TRANSMITTANCE, rng);
     }
     let s_star = gather_params.s_star;
     let clock = gather_params.clock;
@@ -248,7 +248,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         var s1 = vec3<f32>(0.0);
         var l1 = vec3<f32>(0.0);
         if rho > 0.0 {
-            s1 = gather_params.scatter * rho * single_scatter_source_at_rate(y, n, TRACKING_RATE, rng);
+            s1 = gather_params.scatter * rho * single_scatter_source_with(y, n, GATHER_TRANSMITTANCE, rng);
             if field {
                 // (The CPU marches once for all the points' clocks,
                 // `clock_at_each`: the same lattice from `x`.)
@@ -259,7 +259,7 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         if all(j_hat == vec3<f32>(0.0)) && all(l1 == vec3<f32>(0.0)) && all(s1 == vec3<f32>(0.0)) {
             continue;
         }
-        let tr = transmittance_at_rate(x, dir, t, TRACKING_RATE, rng);
+        let tr = transmittance_by(x, dir, t, GATHER_TRANSMITTANCE, rng);
         out.reconstructed += tr * j_hat * step;
         out.internal += tr * l1 * step;
         out.single += tr * s1 * step;
@@ -388,7 +388,18 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
         if all(jv == vec3<f32>(0.0)) {
             continue;
         }
-        let tr = transmittance_at_rate(x, dir, t, TRACKING_RATE, rng) * transmittance_at_rate(y, -n_light, r, TRACKING_RATE, rng);
+        // T(x, y) T(y, light), both in one loop (one inlined march).
+        var tr = vec3<f32>(1.0);
+        for (var leg = 0u; leg < 2u; leg++) {
+            let from_y = leg == 1u;
+            tr *= transmittance_by(
+                select(x, y, from_y),
+                select(dir, -n_light, from_y),
+                select(t, r, from_y),
+                GATHER_TRANSMITTANCE,
+                rng,
+            );
+        }
         if all(tr == vec3<f32>(0.0)) {
             continue;
         }
@@ -478,14 +489,14 @@ fn field_l1_at(
         let rho = density(xp);
         var jv = reconstruct_multi(xp, travel, rho, gather_params.multi_offset);
         if rho > 0.0 {
-            jv += gather_params.scatter * rho * single_scatter_source_at_rate(xp, travel, TRACKING_RATE, rng);
+            jv += gather_params.scatter * rho * single_scatter_source_with(xp, travel, GATHER_TRANSMITTANCE, rng);
         }
         let more = scattering < scatters && rho > 0.0;
         if all(jv == vec3<f32>(0.0)) && !more {
             break;
         }
         throughput *= gather_params.scatter * rho_point
-            * transmittance_at_rate(point, back, r, TRACKING_RATE, rng) * inv_pdf;
+            * transmittance_by(point, back, r, GATHER_TRANSMITTANCE, rng) * inv_pdf;
         sum += throughput * jv;
         if !more || all(throughput == vec3<f32>(0.0)) {
             break;

@@ -32,12 +32,13 @@ fn roulette(weight: ptr<function, vec3<f32>>, rng: ptr<function, Rng>) -> bool {
 // coefficient at `p` towards `n`, transmittance by ratio tracking
 // (`single_scatter_source`).
 fn single_scatter_source(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) -> vec3<f32> {
-    return single_scatter_source_at_rate(p, n, 1.0, rng);
+    return single_scatter_source_with(p, n, 1.0, rng);
 }
 
-// `single_scatter_source` with the shadow rays' ratio tracking at `rate`
-// times the majorant (`single_scatter_source_at_rate`).
-fn single_scatter_source_at_rate(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, Rng>) -> vec3<f32> {
+// `single_scatter_source` with the shadow rays' transmittance by
+// `transmittance_by` at `rate` (`single_scatter_source_with`; the gather
+// passes `GATHER_TRANSMITTANCE`, the march).
+fn single_scatter_source_with(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, Rng>) -> vec3<f32> {
     return scatter_source(p, n, rate, 0.0, rng);
 }
 
@@ -49,31 +50,50 @@ fn gate_scatter_source(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) -> v
     return scatter_source(p, n, 1.0, GATE_PHASE_ROULETTE, rng);
 }
 
-// `single_scatter_source_at_rate` with each light's shadow ray traced with
+// `single_scatter_source_with` with each light's shadow ray traced with
 // probability `q = min(1, P · roulette)` (its term divided by `q`; one number
 // drawn first where `q < 1`), every one for `roulette` 0 (`scatter_source`).
+// The environment's sampled direction is the loop's last turn, so that the
+// shadow ray is traced at one place: Mesa inlines every call, and the
+// gather's march is long.
 fn scatter_source(p: vec3<f32>, n: vec3<f32>, rate: f32, roulette: f32, rng: ptr<function, Rng>) -> vec3<f32> {
     var sum = vec3<f32>(0.0);
     let count = light_count();
-    for (var i = 0u; i < count; i++) {
-        let l = light_at(i, p);
-        let phase = hg(scene.medium.g, dot(l.travel, n));
-        let q = select(1.0, min(phase * roulette, 1.0), roulette > 0.0);
-        if q < 1.0 && rng_next_f32(rng) >= q {
-            continue;
+    let turns = count + select(0u, 1u, env_present());
+    for (var i = 0u; i < turns; i++) {
+        var ray: ShadowRay;
+        if i < count {
+            let l = light_at(i, p);
+            let phase = hg(scene.medium.g, dot(l.travel, n));
+            let q = select(1.0, min(phase * roulette, 1.0), roulette > 0.0);
+            if q < 1.0 && rng_next_f32(rng) >= q {
+                continue;
+            }
+            ray = ShadowRay(-l.travel, l.distance, l.irradiance * (phase / q));
+        } else {
+            ray = environment_ray(p, n, rng);
+            if all(ray.weight == vec3<f32>(0.0)) {
+                continue;
+            }
         }
-        let tr = transmittance_at_rate(p, -l.travel, l.distance, rate, rng);
-        sum += l.irradiance * tr * (phase / q);
-    }
-    if env_present() {
-        sum += environment_source(p, n, rate, rng);
+        sum += ray.weight * transmittance_by(p, ray.towards, ray.distance, rate, rng);
     }
     return sum;
 }
 
+// A shadow ray of `S₁`: its direction, length and the source's weight
+// before the transmittance.
+struct ShadowRay {
+    towards: vec3<f32>,
+    distance: f32,
+    weight: vec3<f32>,
+}
+
 // The environment's part of `S₁(p, n) / b(p)` by one-sample MIS between the
-// map and the phase function (`environment_source`).
-fn environment_source(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, Rng>) -> vec3<f32> {
+// map and the phase function (`environment_source`): the direction drawn
+// and its weight, zero where it carries nothing.
+fn environment_ray(p: vec3<f32>, n: vec3<f32>, rng: ptr<function, Rng>) -> ShadowRay {
+    let none = ShadowRay(n, 0.0, vec3<f32>(0.0));
     let g = scene.medium.g;
     let q = scene.env_share;
     let u0 = rng_next_f32(rng);
@@ -83,7 +103,7 @@ fn environment_source(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, 
     if u0 < q {
         let s = env_sample(u1, u2);
         if s.pdf <= 0.0 {
-            return vec3<f32>(0.0);
+            return none;
         }
         towards = s.towards;
     } else {
@@ -95,13 +115,13 @@ fn environment_source(p: vec3<f32>, n: vec3<f32>, rate: f32, rng: ptr<function, 
         pdf = q * env_pdf(towards) + (1.0 - q) * phase;
     }
     if !(pdf > 0.0) {
-        return vec3<f32>(0.0);
+        return none;
     }
     let radiance = env_radiance(towards);
     if all(radiance == vec3<f32>(0.0)) {
-        return vec3<f32>(0.0);
+        return none;
     }
-    return radiance * (phase / pdf) * transmittance_at_rate(p, towards, BIG, rate, rng);
+    return ShadowRay(towards, BIG, radiance * (phase / pdf));
 }
 
 // A radiance estimate and its single-scattering part.

@@ -9,6 +9,12 @@
 // - `free_flight`: spectral tracking (Kutz et al. 2017, "max" probabilities).
 // - `transmittance`: ratio tracking (Novák et al. 2014) with Russian
 //   roulette once the estimate is small.
+// - `transmittance_marched`: the unbiased ray march (Kettunen et al. 2021)
+//   that the gather uses; `transmittance_by` picks one of the two as the
+//   Rust `Transmittance` does (a rate of `TRANSMITTANCE_MARCHED` is the
+//   march). Its constants come from Rust (the generated prelude:
+//   crate::physics::tracking::{MARCH_SEGMENT_DEPTH, MARCH_STRIDE_DEPTH,
+//   MARCH_MAX_TERMS}).
 // Every tentative collision advances the ray by at least one f32 step
 // (`tentative_advance`), as on the CPU, so no flight can stall.
 
@@ -195,18 +201,217 @@ fn transmittance_at_rate(
         }
         let sigma_t = medium_sigma_t(origin + dir * c.t);
         tr *= max(vec3<f32>(1.0) - sigma_t / c.majorant, vec3<f32>(0.0));
-        let largest = max_element(tr);
-        if largest <= 0.0 {
+        if !roulette_small(&tr, rng) {
             break;
         }
-        if largest < 0.1 {
-            // Russian roulette: survive with probability 1/2, doubled.
-            if rng_next_f32(rng) < 0.5 {
-                tr = vec3<f32>(0.0);
+    }
+    return tr;
+}
+
+// Russian roulette on a running transmittance estimate (`roulette_small`):
+// once its largest channel in magnitude is below 0.1 it survives with
+// probability 1/2, doubled; `false`, with `tr` zero, where it was dropped
+// or carries nothing.
+fn roulette_small(tr: ptr<function, vec3<f32>>, rng: ptr<function, Rng>) -> bool {
+    let largest = max_element(abs(*tr));
+    if !(largest > 0.0) {
+        *tr = vec3<f32>(0.0);
+        return false;
+    }
+    if largest < 0.1 {
+        if rng_next_f32(rng) < 0.5 {
+            *tr = vec3<f32>(0.0);
+            return false;
+        }
+        *tr *= 2.0;
+    }
+    return true;
+}
+
+// The transmittance by ratio tracking at `rate` times the majorant, or by
+// the unbiased ray march where `rate` is `TRANSMITTANCE_MARCHED`
+// (`Transmittance::estimate`).
+fn transmittance_by(
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    t_max: f32,
+    rate: f32,
+    rng: ptr<function, Rng>,
+) -> vec3<f32> {
+    if rate == TRANSMITTANCE_MARCHED {
+        return transmittance_marched(origin, dir, t_max, rng);
+    }
+    return transmittance_at_rate(origin, dir, t_max, rate, rng);
+}
+
+// The unbiased ray-marched transmittance (`transmittance_marched`): the ray
+// cut into segments of majorant optical depth `MARCH_SEGMENT_DEPTH` (one
+// segment of its own depth where it holds less), two jittered marches of
+// each segment's optical depth, `e^{-x0}` times the rouletted power series
+// of `e^{x0 - tau}` with each later factor from a march of its own
+// (`close_segment`), the running product rouletted below 0.1.
+//
+// Written as one loop around one walk of the majorant grid with one
+// density lookup in it: Mesa inlines every call, and the gather makes a
+// dozen transmittance calls (a walk per step of the method, as on the CPU,
+// made the gather's pipeline too large for lavapipe to compile in
+// reasonable time and memory). Each turn of the loop is one walk: the
+// first measures the ray's majorant depth up to one segment's worth (the
+// CPU's first walk); then, per segment, its two first marches together
+// (which also find where the segment ends) and each factor of its series.
+// The random numbers are drawn in the CPU's order; where the CPU walks the
+// ray once for the first marches, this walks each segment from its start
+// (the same points up to rounding).
+fn transmittance_marched(
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    t_max: f32,
+    rng: ptr<function, Rng>,
+) -> vec3<f32> {
+    let clip = medium_clip(origin, dir);
+    if !clip.hit {
+        return vec3<f32>(1.0);
+    }
+    let t1 = min(clip.t1, t_max);
+    if !(t1 > clip.t0) {
+        return vec3<f32>(1.0);
+    }
+    // One segment of the ray's own depth where it holds at most
+    // `MARCH_SEGMENT_DEPTH` (`short`), else segments of exactly that, the
+    // last cut short. Set by the measuring turn.
+    var short = true;
+    var depth = MARCH_SEGMENT_DEPTH;
+    var stride = 1.0;
+
+    var tr = vec3<f32>(1.0);
+    // The segment: its start, its end (once its first marches found it)
+    // and whether it is the ray's last.
+    var seg_t = clip.t0;
+    var seg_end = t1;
+    var last = true;
+    // The series: the first march's depth, the current term and the sum,
+    // the next factor's index and the probability it was drawn with. `k`
+    // is 1 for the measuring turn, 0 while the segment's first marches
+    // are due.
+    var x0 = vec3<f32>(0.0);
+    var term = vec3<f32>(0.0);
+    var sum = vec3<f32>(1.0);
+    var k = 1u;
+    var p = 1.0;
+    loop {
+        let measuring = k == 1u;
+        let first = k == 0u;
+        // One march from `seg_t`: the points `stride` apart in majorant
+        // depth from a random offset (two interleaved sequences for the
+        // segment's first marches), at most `depth` of it; none while
+        // measuring.
+        var na = BIG;
+        var nb = BIG;
+        var span_end = seg_end;
+        if !measuring {
+            na = rng_next_f32(rng) * stride;
+        }
+        if first {
+            nb = rng_next_f32(rng) * stride;
+        }
+        if first || measuring {
+            span_end = t1;
+        }
+        var xa = vec3<f32>(0.0);
+        var xb = vec3<f32>(0.0);
+        var s = 0.0;
+        var reached = false;
+        var t_end = t1;
+        var dda = dda_start(origin, dir, seg_t, span_end);
+        loop {
+            let seg = dda_next(&dda);
+            if !seg.valid {
                 break;
             }
-            tr *= 2.0;
+            let m = seg.majorant;
+            let a = seg.t0;
+            let sb = s + m * (seg.t1 - a);
+            if measuring {
+                s = sb;
+                if sb > MARCH_SEGMENT_DEPTH {
+                    // Long: the segments are `MARCH_SEGMENT_DEPTH` deep.
+                    short = false;
+                    break;
+                }
+                continue;
+            }
+            if m <= 0.0 {
+                continue;
+            }
+            let lim = min(sb, depth);
+            loop {
+                let n = min(na, nb);
+                if n >= lim {
+                    break;
+                }
+                let v = medium_sigma_t(origin + dir * (a + (n - s) / m)) / m;
+                if na <= nb {
+                    xa += v;
+                    na += stride;
+                } else {
+                    xb += v;
+                    nb += stride;
+                }
+            }
+            if first && !short && sb >= depth {
+                // The segment ends where its majorant depth is `depth`.
+                t_end = clamp(a + (depth - s) / m, seg_t, seg.t1);
+                reached = true;
+                break;
+            }
+            // Past its last point; a long ray's first marches walk on to
+            // where the segment ends.
+            if (short || !first) && na >= depth && nb >= depth {
+                break;
+            }
+            s = sb;
         }
+        if measuring {
+            if !(s < BIG) {
+                return vec3<f32>(1.0);
+            }
+            if short {
+                if s <= 0.0 {
+                    return vec3<f32>(1.0);
+                }
+                depth = s;
+            }
+            stride = depth / max(ceil(depth / MARCH_STRIDE_DEPTH), 1.0);
+            k = 0u;
+            continue;
+        }
+        if first {
+            x0 = xa * stride;
+            term = x0 - xb * stride;
+            sum = vec3<f32>(1.0) + term;
+            seg_end = t_end;
+            last = !reached;
+            k = 2u;
+        } else {
+            term *= (x0 - xa * stride) / (f32(k) * p);
+            sum += term;
+            k += 1u;
+        }
+        // The series' next factor, taken with probability `p`.
+        if k < MARCH_MAX_TERMS {
+            p = min(max_element(abs(term)) * 4.0, 1.0);
+            if p > 0.0 && rng_next_f32(rng) < p {
+                continue;
+            }
+        }
+        tr *= exp(-x0) * sum;
+        if last || !roulette_small(&tr, rng) {
+            return tr;
+        }
+        seg_t = seg_end;
+        seg_end = t1;
+        k = 0u;
     }
+    // Unreachable: the loop only returns.
     return tr;
 }

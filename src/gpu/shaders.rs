@@ -261,9 +261,29 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
         crate::physics::internal::sources::GOLDEN_ANGLE
     ),
     shared!(
-        "TRACKING_RATE",
+        "GATHER_TRANSMITTANCE",
         F32,
-        crate::physics::internal::gather::TRACKING_RATE
+        crate::physics::internal::gather::GATHER_TRANSMITTANCE.wgsl_rate()
+    ),
+    shared!(
+        "TRANSMITTANCE_MARCHED",
+        F32,
+        crate::physics::tracking::Transmittance::Marched.wgsl_rate()
+    ),
+    shared!(
+        "MARCH_SEGMENT_DEPTH",
+        F32,
+        crate::physics::tracking::MARCH_SEGMENT_DEPTH
+    ),
+    shared!(
+        "MARCH_STRIDE_DEPTH",
+        F32,
+        crate::physics::tracking::MARCH_STRIDE_DEPTH
+    ),
+    shared!(
+        "MARCH_MAX_TERMS",
+        U32,
+        crate::physics::tracking::MARCH_MAX_TERMS
     ),
     shared!(
         "SEGMENT_PIECES",

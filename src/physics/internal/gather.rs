@@ -77,32 +77,20 @@ use crate::physics::tracking::Transmittance;
 use crate::physics::volume::{DensityField, Volume};
 
 /// How the gather estimates every transmittance (to the window's points,
-/// the shadow rays of `S₁`, `L₁`'s segments): ratio tracking at
-/// [`TRACKING_RATE`] times the majorant, on both backends.
-///
-/// The unbiased ray march
-/// ([`crate::physics::tracking::transmittance_marched`]) cut the CPU
-/// gather's variance × time 14–29 % on the plumes, the cumulus, the
-/// chromatic and the point-lit scenes, but it is not in: the backends
-/// must draw the same numbers for the same estimate (a GPU test checks
-/// it), and the march in WGSL, inlined at each of the gather shader's
-/// dozen transmittance calls, grew the GPU tests' process to 24 GB on
-/// Mesa's software driver, which was killed for memory
-/// ([validation](crate::doc::validation) §3.11).
-pub const GATHER_TRANSMITTANCE: Transmittance = Transmittance::Ratio(TRACKING_RATE);
-
-/// The gather's ratio tracking samples tentative collisions at this many
-/// times the majorant ([`crate::physics::tracking::transmittance_at_rate`];
-/// the WGSL `TRACKING_RATE`). The majorant grid is tight in the puffs'
-/// cores, where ratio tracking at rate 1 degenerates to a yes-or-no
-/// estimate. Measured with `lantern noise` (puffs 256², M 16384, K 16,
-/// SH order 4, `s*` 0.5): at 8 points per ray the per-pass noise of the
-/// gather fell from 31.4 % to 20.6 % of the image mean (single scatter
-/// 12.2 → 4.0 %) for 13 % more time per pass, 2.05× less variance per
-/// second; at 2 points per ray 73.1 → 55.6 % for 18 % more, 1.46×. The
-/// walks keep rate 1: their noise is their paths' ([validation](crate::doc::validation)
-/// §4, "Tried and not kept").
-pub const TRACKING_RATE: f32 = 8.0;
+/// the shadow rays of `S₁`, `L₁`'s segments, the sky behind the medium),
+/// on both backends: the unbiased ray march
+/// ([`crate::physics::tracking::transmittance_marched`]; the WGSL
+/// `transmittance_marched`, one loop with a single density lookup so that
+/// Mesa's software driver, which inlines each of the gather shader's dozen
+/// calls, can compile it). Ratio tracking at 8 times the majorant came
+/// before it (itself 2.05× less variance per second than plain ratio
+/// tracking on the puffs, where a tight majorant makes ratio tracking a
+/// yes-or-no estimate); against it the march cut the gather's variance
+/// × time 14–29 % on the plumes, the cumulus, the chromatic and the
+/// point-lit scenes ([validation](crate::doc::validation) §3.11). The walks
+/// keep plain ratio tracking: their noise is their paths'
+/// ([validation](crate::doc::validation) §4, "Tried and not kept").
+pub const GATHER_TRANSMITTANCE: Transmittance = Transmittance::Marched;
 
 /// The most stratified points per camera ray ([`gather`]'s `samples`;
 /// the scene's `light_samples` is validated against it): the settings'
