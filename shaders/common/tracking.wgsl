@@ -184,16 +184,12 @@ fn transmittance_at_rate(
     rate: f32,
     rng: ptr<function, Rng>,
 ) -> vec3<f32> {
-    let clip = medium_clip(origin, dir);
-    if !clip.hit {
-        return vec3<f32>(1.0);
-    }
-    let t1 = min(clip.t1, t_max);
-    if t1 <= clip.t0 {
+    let span = in_medium(origin, dir, t_max);
+    if !span.hit {
         return vec3<f32>(1.0);
     }
     var tr = vec3<f32>(1.0);
-    var s = sample_tentative_start_at_rate(origin, dir, clip.t0, t1, max(rate, 1.0), rng);
+    var s = sample_tentative_start_at_rate(origin, dir, span.t0, span.t1, max(rate, 1.0), rng);
     loop {
         let c = sample_tentative_next(&s, rng);
         if !c.found {
@@ -206,6 +202,15 @@ fn transmittance_at_rate(
         }
     }
     return tr;
+}
+
+// The stretch `[t0, t1]` of the ray `origin + t dir`, `t <= t_max`, inside
+// the medium's box (`in_medium`), `hit` false where it is empty: what every
+// transmittance estimate integrates over.
+fn in_medium(origin: vec3<f32>, dir: vec3<f32>, t_max: f32) -> Interval {
+    let clip = medium_clip(origin, dir);
+    let t1 = min(clip.t1, t_max);
+    return Interval(clip.t0, t1, clip.hit && t1 > clip.t0);
 }
 
 // Russian roulette on a running transmittance estimate (`roulette_small`):
@@ -268,14 +273,11 @@ fn transmittance_marched(
     t_max: f32,
     rng: ptr<function, Rng>,
 ) -> vec3<f32> {
-    let clip = medium_clip(origin, dir);
-    if !clip.hit {
+    let span = in_medium(origin, dir, t_max);
+    if !span.hit {
         return vec3<f32>(1.0);
     }
-    let t1 = min(clip.t1, t_max);
-    if !(t1 > clip.t0) {
-        return vec3<f32>(1.0);
-    }
+    let t1 = span.t1;
     // One segment of the ray's own depth where it holds at most
     // `MARCH_SEGMENT_DEPTH` (`short`), else segments of exactly that, the
     // last cut short. Set by the measuring turn.
@@ -286,7 +288,7 @@ fn transmittance_marched(
     var tr = vec3<f32>(1.0);
     // The segment: its start, its end (once its first marches found it)
     // and whether it is the ray's last.
-    var seg_t = clip.t0;
+    var seg_t = span.t0;
     var seg_end = t1;
     var last = true;
     // The series: the first march's depth, the current term and the sum,
