@@ -166,16 +166,18 @@ pub(crate) fn mean_and_its_variance(
     stream: u32,
     mut f: impl FnMut(&mut Rng) -> Vec3,
 ) -> (Vec3, Vec3) {
-    let (mut sum, mut sum2) = (Vec3::ZERO, Vec3::ZERO);
+    // Summed in f64: a low-variance estimator's `sum2/n − mean²` cancels
+    // almost to nothing.
+    let (mut sum, mut sum2) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
     for w in 0..walks {
         let mut rng = Rng::for_sample(seed, w, stream);
-        let v = f(&mut rng);
+        let v = f(&mut rng).as_dvec3();
         sum += v;
         sum2 += v * v;
     }
-    let mean = sum / walks as f32;
-    let var = (sum2 / walks as f32 - mean * mean).max(Vec3::ZERO);
-    (mean, var / walks as f32)
+    let mean = sum / walks as f64;
+    let var = (sum2 / walks as f64 - mean * mean).max(glam::DVec3::ZERO);
+    (mean.as_vec3(), (var / walks as f64).as_vec3())
 }
 
 /// Parameters of the tests' hand-built caches: order-1 SH, one light

@@ -661,23 +661,12 @@ mod tests {
         assert!(rel_var[1] < 0.4, "rate 8: relative variance {}", rel_var[1]);
     }
 
-    /// The mean and the relative variance of `n` estimates by `f`.
-    fn moments(n: u32, seed: u64, mut f: impl FnMut(&mut Rng) -> Vec3) -> (Vec3, Vec3, Vec3) {
-        let (mut sum, mut sum2) = (Vec3::ZERO.as_dvec3(), Vec3::ZERO.as_dvec3());
-        for i in 0..n {
-            let mut rng = Rng::for_sample(seed, i, 0);
-            let v = f(&mut rng).as_dvec3();
-            sum += v;
-            sum2 += v * v;
-        }
-        let mean = sum / n as f64;
-        let var = (sum2 / n as f64 - mean * mean).max(glam::DVec3::ZERO);
-        let stderr = (var / n as f64).powf(0.5);
-        (
-            mean.as_vec3(),
-            stderr.as_vec3(),
-            (var / (mean * mean)).as_vec3(),
-        )
+    /// The mean of `n` estimates by `f`, its standard error and the
+    /// estimates' relative variance.
+    fn moments(n: u32, seed: u64, f: impl FnMut(&mut Rng) -> Vec3) -> (Vec3, Vec3, Vec3) {
+        let (mean, var_of_mean) = crate::physics::testing::mean_and_its_variance(n, seed, 0, f);
+        let rel_var = var_of_mean * n as f32 / (mean * mean);
+        (mean, var_of_mean.powf(0.5), rel_var)
     }
 
     /// The ray march through a homogeneous sphere matches `exp(−σ L)` per
