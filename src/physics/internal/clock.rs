@@ -21,13 +21,17 @@
 //! rule on a lattice anchored at the start of each flight and of each
 //! majorant cell, of steps of at most a quarter of the window `s*` in
 //! majorant optical depth (at most [`CLOCK_MAX_STEPS`] per cell, one where
-//! the cell is thinner than that: `clock_step`). Being anchored at the
-//! cells on every ray, its error at a sharp edge is a smooth function of
-//! where the edge falls on it: on a homogeneous sphere lit from behind the
-//! camera it draws faint rings about the image's centre (README, Known
-//! problems; a lattice shifted by a phase hashed from each ray removes
-//! them, but with it the backends' agreement test on a 512³ grid fails,
-//! [validation](crate::doc::validation) §3.1, so it is not in).
+//! the cell is thinner than that: `clock_step`), shifted by a phase hashed
+//! from the ray's direction ([`lattice_phase`]). Anchored at the same
+//! place on every ray, the lattice's error at a sharp edge was a smooth
+//! function of where the edge fell on it, and drew rings about the image's
+//! centre on a homogeneous sphere lit from behind the camera; with the
+//! phase that error is noise between rays with a mean of zero
+//! ([validation](crate::doc::validation) §3.1). The steps must stay short
+//! next to the window: a clock whose rate is averaged over longer
+//! stretches, even with the stretch's optical depth exact, puts more than
+//! `s*` of real optical depth into windows where the density is above the
+//! stretch's mean, and the single-scatter window then loses light (§3.12).
 //! The clock is that quadrature;
 //! the collisions themselves come from spectral tracking against the true
 //! `c`, so the walk stays unbiased for `L` whatever the quadrature error.
