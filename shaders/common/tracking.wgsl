@@ -361,7 +361,8 @@ fn transmittance_marched(
                 }
             }
             if first && !short && sb >= depth {
-                // The segment ends where its majorant depth is `depth`.
+                // The segment ends where its majorant depth is `depth`:
+                // always past `seg_t`, as on the CPU (tracking.rs says why).
                 t_end = clamp(a + (depth - s) / m, seg_t, seg.t1);
                 reached = true;
                 break;

@@ -491,6 +491,14 @@ pub fn transmittance_marched<D: DensityField>(
             if short || sb < depth {
                 break;
             }
+            // Always past `seg_t`: a segment holds `depth` (4) of majorant
+            // depth, and a prepared medium at most `MAX_DEPTH_PER_VOXEL`
+            // (100) over its feature length (a voxel, or a 32nd of the box
+            // for the analytic shapes), so the segment is at least 4 % of
+            // that long, while `t` is at most the box's diagonal (the
+            // gather marches from where its rays enter the box), whose
+            // rounding step is some 10⁻⁷ of it: only a grid of millions of
+            // voxels a side could stall here.
             let t_end = (a + (depth - s) / m).clamp(seg_t, b);
             tr *= close_segment(
                 vol,
