@@ -118,8 +118,17 @@ pub struct WgslConst {
 }
 
 /// A [`WgslConst`] of kind `$kind` named `$name`, from the Rust expression
-/// `$value` (whose text is kept as [`WgslConst::rust`]).
+/// `$value` (whose text is kept as [`WgslConst::rust`]); or, written
+/// `shared!(KIND, NAME in path::to::module)`, from the Rust item of the
+/// same name, `path::to::module::NAME`.
 macro_rules! shared {
+    ($kind:ident, $name:ident in $($module:ident)::+) => {
+        WgslConst {
+            name: stringify!($name),
+            value: WgslValue::$kind($($module)::+ :: $name),
+            rust: concat!($(stringify!($module), "::",)+ stringify!($name)),
+        }
+    };
     ($name:literal, $kind:ident, $($value:tt)+) => {
         WgslConst {
             name: $name,
@@ -134,14 +143,14 @@ macro_rules! shared {
 /// themselves (a test checks every file under `shaders/`).
 pub const WGSL_CONSTANTS: &[WgslConst] = &[
     // Scene data tags (`gpu/mirrors.rs`, `shaders/common/scene.wgsl`).
-    shared!("DENSITY_SPHERE", U32, crate::gpu::mirrors::DENSITY_SPHERE),
-    shared!("DENSITY_BOX", U32, crate::gpu::mirrors::DENSITY_BOX),
-    shared!("DENSITY_GRID", U32, crate::gpu::mirrors::DENSITY_GRID),
-    shared!("LIGHT_SUN", U32, crate::gpu::mirrors::LIGHT_SUN),
-    shared!("LIGHT_POINT", U32, crate::gpu::mirrors::LIGHT_POINT),
-    shared!("ENV_NONE", U32, crate::gpu::mirrors::ENV_NONE),
-    shared!("ENV_CONSTANT", U32, crate::gpu::mirrors::ENV_CONSTANT),
-    shared!("ENV_MAP", U32, crate::gpu::mirrors::ENV_MAP),
+    shared!(U32, DENSITY_SPHERE in crate::gpu::mirrors),
+    shared!(U32, DENSITY_BOX in crate::gpu::mirrors),
+    shared!(U32, DENSITY_GRID in crate::gpu::mirrors),
+    shared!(U32, LIGHT_SUN in crate::gpu::mirrors),
+    shared!(U32, LIGHT_POINT in crate::gpu::mirrors),
+    shared!(U32, ENV_NONE in crate::gpu::mirrors),
+    shared!(U32, ENV_CONSTANT in crate::gpu::mirrors),
+    shared!(U32, ENV_MAP in crate::gpu::mirrors),
     // The settings' enums (`scene/settings.rs`).
     shared!("CLOCK_GEOMETRIC", U32, crate::scene::Clock::Geometric.tag()),
     shared!(
@@ -152,15 +161,15 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!("L1_FIELD", U32, crate::scene::L1Form::Field.tag()),
     shared!("L1_POINTS", U32, crate::scene::L1Form::Points.tag()),
     // The display pass (`gpu/display.rs`).
-    shared!("VIEW_CLAMP", U32, crate::gpu::mirrors::VIEW_CLAMP),
-    shared!("VIEW_FILMIC", U32, crate::gpu::mirrors::VIEW_FILMIC),
-    shared!("MODE_SINGLE", U32, crate::gpu::mirrors::MODE_SINGLE),
-    shared!("MODE_SPLIT", U32, crate::gpu::mirrors::MODE_SPLIT),
-    shared!("MODE_HEAT", U32, crate::gpu::mirrors::MODE_HEAT),
+    shared!(U32, VIEW_CLAMP in crate::gpu::mirrors),
+    shared!(U32, VIEW_FILMIC in crate::gpu::mirrors),
+    shared!(U32, MODE_SINGLE in crate::gpu::mirrors),
+    shared!(U32, MODE_SPLIT in crate::gpu::mirrors),
+    shared!(U32, MODE_HEAT in crate::gpu::mirrors),
     // Workgroup sizes the dispatches count with.
-    shared!("WORKGROUP_SIDE", U32, crate::gpu::mirrors::WORKGROUP_SIDE),
-    shared!("WALK_LANES", U32, crate::gpu::mirrors::WALK_LANES),
-    shared!("PLACEMENT_LANES", U32, crate::gpu::mirrors::PLACEMENT_LANES),
+    shared!(U32, WORKGROUP_SIDE in crate::gpu::mirrors),
+    shared!(U32, WALK_LANES in crate::gpu::mirrors),
+    shared!(U32, PLACEMENT_LANES in crate::gpu::mirrors),
     // The walks' private array of gates, `N + 1` for the largest `N`.
     shared!(
         "GPU_MAX_GATES",
@@ -177,22 +186,10 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!("RNG_INCREMENT", U32, crate::physics::rng::INCREMENT),
     shared!("R2_STEP_X", U32, crate::physics::rng::R2_STEPS[0]),
     shared!("R2_STEP_Y", U32, crate::physics::rng::R2_STEPS[1]),
-    shared!(
-        "PIXEL_OFFSET_STREAM",
-        U32,
-        crate::physics::rng::PIXEL_OFFSET_STREAM
-    ),
+    shared!(U32, PIXEL_OFFSET_STREAM in crate::physics::rng),
     // Random stream tags.
-    shared!(
-        "PLACEMENT_STREAM",
-        U32,
-        crate::physics::internal::placement::PLACEMENT_STREAM
-    ),
-    shared!(
-        "WALK_STREAM",
-        U32,
-        crate::physics::internal::sources::WALK_STREAM
-    ),
+    shared!(U32, PLACEMENT_STREAM in crate::physics::internal::placement),
+    shared!(U32, WALK_STREAM in crate::physics::internal::sources),
     // The estimators' constants.
     shared!("PI", F32, std::f32::consts::PI),
     shared!(
@@ -200,66 +197,22 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
         F32,
         crate::physics::phase::ISOTROPIC_EPS
     ),
-    shared!("MIN_DIST2", F32, crate::physics::lights::MIN_DIST2),
-    shared!("FAR_LIGHT", F32, crate::physics::lights::FAR_LIGHT),
-    shared!(
-        "RR_START_DEPTH",
-        U32,
-        crate::physics::reference::RR_START_DEPTH
-    ),
-    shared!(
-        "RR_MAX_SURVIVAL",
-        F32,
-        crate::physics::reference::RR_MAX_SURVIVAL
-    ),
-    shared!(
-        "GATE_PHASE_ROULETTE",
-        F32,
-        crate::physics::reference::GATE_PHASE_ROULETTE
-    ),
+    shared!(F32, MIN_DIST2 in crate::physics::lights),
+    shared!(F32, FAR_LIGHT in crate::physics::lights),
+    shared!(U32, RR_START_DEPTH in crate::physics::reference),
+    shared!(F32, RR_MAX_SURVIVAL in crate::physics::reference),
+    shared!(F32, GATE_PHASE_ROULETTE in crate::physics::reference),
     shared!("SH_MAX_ORDER", U32, crate::physics::sh::MAX_ORDER),
     shared!("SH_NORM", F32Array, &crate::physics::sh::NORM),
-    shared!(
-        "CLOCK_SPLIT_WINDOW",
-        F32,
-        crate::physics::internal::clock::CLOCK_SPLIT_WINDOW
-    ),
-    shared!(
-        "CLOCK_MAX_STEPS",
-        F32,
-        crate::physics::internal::clock::CLOCK_MAX_STEPS
-    ),
-    shared!(
-        "PHASE_DROPPED_BITS",
-        U32,
-        crate::physics::internal::clock::PHASE_DROPPED_BITS
-    ),
-    shared!(
-        "COLLISION_FLOOR",
-        F32,
-        crate::physics::internal::chances::COLLISION_FLOOR
-    ),
-    shared!(
-        "COLLISION_DEPTH",
-        F32,
-        crate::physics::internal::chances::COLLISION_DEPTH
-    ),
-    shared!(
-        "GUIDED_COLLISIONS",
-        U32,
-        crate::physics::internal::guiding::GUIDED_COLLISIONS
-    ),
-    shared!(
-        "GUIDE_PROBABILITY",
-        F32,
-        crate::physics::internal::guiding::GUIDE_PROBABILITY
-    ),
-    shared!("GUIDE_G", F32, crate::physics::internal::guiding::GUIDE_G),
-    shared!(
-        "GOLDEN_ANGLE",
-        F32,
-        crate::physics::internal::sources::GOLDEN_ANGLE
-    ),
+    shared!(F32, CLOCK_SPLIT_WINDOW in crate::physics::internal::clock),
+    shared!(F32, CLOCK_MAX_STEPS in crate::physics::internal::clock),
+    shared!(U32, PHASE_DROPPED_BITS in crate::physics::internal::clock),
+    shared!(F32, COLLISION_FLOOR in crate::physics::internal::chances),
+    shared!(F32, COLLISION_DEPTH in crate::physics::internal::chances),
+    shared!(U32, GUIDED_COLLISIONS in crate::physics::internal::guiding),
+    shared!(F32, GUIDE_PROBABILITY in crate::physics::internal::guiding),
+    shared!(F32, GUIDE_G in crate::physics::internal::guiding),
+    shared!(F32, GOLDEN_ANGLE in crate::physics::internal::sources),
     shared!(
         "GATHER_TRANSMITTANCE",
         F32,
@@ -270,21 +223,9 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
         F32,
         crate::physics::tracking::Transmittance::Marched.wgsl_rate()
     ),
-    shared!(
-        "MARCH_SEGMENT_DEPTH",
-        F32,
-        crate::physics::tracking::MARCH_SEGMENT_DEPTH
-    ),
-    shared!(
-        "MARCH_STRIDE_DEPTH",
-        F32,
-        crate::physics::tracking::MARCH_STRIDE_DEPTH
-    ),
-    shared!(
-        "MARCH_MAX_TERMS",
-        U32,
-        crate::physics::tracking::MARCH_MAX_TERMS
-    ),
+    shared!(F32, MARCH_SEGMENT_DEPTH in crate::physics::tracking),
+    shared!(F32, MARCH_STRIDE_DEPTH in crate::physics::tracking),
+    shared!(U32, MARCH_MAX_TERMS in crate::physics::tracking),
     shared!(
         "SEGMENT_PIECES",
         U32,
