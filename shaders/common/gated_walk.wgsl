@@ -317,6 +317,108 @@ fn guided_direction(
     return GuidedDirection(next, 0.0);
 }
 
+// A collision's second flight (`second_flight`,
+// src/physics/internal/guiding.rs), taken in media of `g` ≥
+// `SECOND_FLIGHT_MIN_G` instead of guided directions: whether there is one,
+// its direction, and the balance-heuristic factors `P/(P + q)` of its gates
+// and of the gates of the walk's own flight. `SECOND_FLIGHT_MIN_G` and
+// `SECOND_FLIGHT_MAX_DEPTH` come from Rust (the generated prelude).
+struct SecondFlight {
+    valid: bool,
+    dir: vec3<f32>,
+    factor: f32,
+    own_factor: f32,
+}
+
+// `P/(P + q)` at the direction `d`: the phase function about the incoming
+// `dir` against the lobe about `towards`, both of the medium's `g`.
+fn flight_balance(g: f32, dir: vec3<f32>, towards: vec3<f32>, d: vec3<f32>) -> f32 {
+    let p_phase = hg(g, dot(dir, d));
+    let q = hg(g, dot(d, towards));
+    if p_phase + q > 0.0 {
+        return p_phase / (p_phase + q);
+    }
+    return 0.0;
+}
+
+// The second flight of a backward walk at a collision at `p`, where it came
+// in along `dir` and drew its own direction `own` from the phase function:
+// one light chosen in proportion to its unshadowed irradiance by `u`; none
+// where the majorant's optical depth towards it reaches
+// `SECOND_FLIGHT_MAX_DEPTH` (up to the box's edge or a point light) or no
+// light shines; else its direction from the lobe about the direction
+// towards the light, placed by `u1, u2`.
+fn second_flight(
+    p: vec3<f32>,
+    dir: vec3<f32>,
+    own: vec3<f32>,
+    u: f32,
+    u1: f32,
+    u2: f32,
+) -> SecondFlight {
+    var none: SecondFlight;
+    none.valid = false;
+    let count = light_count();
+    var total = 0.0;
+    for (var i = 0u; i < count; i++) {
+        total += max(max_element(light_at(i, p).irradiance), 0.0);
+    }
+    if !(total > 0.0) || total > 1.0e38 {
+        return none;
+    }
+    // A light in proportion to its irradiance (the last one that shines
+    // where rounding leaves `pick` past the end).
+    var pick = u * total;
+    var found = false;
+    var light: LightSample;
+    var has_last = false;
+    var last: LightSample;
+    for (var i = 0u; i < count; i++) {
+        let l = light_at(i, p);
+        let w = max(max_element(l.irradiance), 0.0);
+        if w > 0.0 {
+            last = l;
+            has_last = true;
+            if !found && pick < w {
+                light = l;
+                found = true;
+            }
+            pick -= w;
+        }
+    }
+    if !found {
+        if !has_last {
+            return none;
+        }
+        light = last;
+    }
+    let towards = -light.travel;
+    let clip = medium_clip(p, towards);
+    if !clip.hit {
+        return none;
+    }
+    var it = dda_start(p, towards, clip.t0, min(clip.t1, light.distance));
+    var depth = 0.0;
+    loop {
+        let seg = dda_next(&it);
+        if !seg.valid {
+            break;
+        }
+        depth += seg.majorant * (seg.t1 - seg.t0);
+        if depth >= SECOND_FLIGHT_MAX_DEPTH {
+            return none;
+        }
+    }
+    let g = scene.medium.g;
+    let second = sample_hg(g, towards, u1, u2);
+    return SecondFlight(
+        true,
+        second,
+        flight_balance(g, dir, towards, second),
+        flight_balance(g, dir, towards, own),
+    );
+}
+
 // One gate of `accumulate_j_from` (its `on_gate` closure): adds
 // `w · α σ_t · ρ · (S₁/b)(z_k, n_k)` to term `k`, with `ρ = ρ(z_k)` for the
 // geometric clock and `ρ(z)` for the optical-depth clock, and to
@@ -359,6 +461,10 @@ fn gate_add(
 // real collisions, phase-sampled directions, gates at clock `k s*`; leaving
 // the box ends it. Terms from `GPU_MAX_GATES − 1` on share the last slot.
 // `walk_unscattered` receives the part added before the first collision.
+// Where `g` ≥ `SECOND_FLIGHT_MIN_G` each collision may also take a second
+// flight (`second_flight`), run as a state of the same loop — so that the
+// shader holds one flight, which Mesa's compiler inlines once — before the
+// walk resumes its own flight from the collision.
 fn accumulate_j_from(
     z: vec3<f32>,
     n: vec3<f32>,
@@ -386,11 +492,38 @@ fn accumulate_j_from(
     // Clock value at `origin`.
     var clock_at_origin = 0.0;
     var collisions = 0u;
+    // Second flights (`second_flight`): whether they are taken, whether one
+    // runs, whether it has just ended, and the factor of the gates of the
+    // walk's own flight since its last collision. While one runs, the walk's
+    // own state at the collision waits in `own_*`.
+    let seconds = scene.medium.g >= SECOND_FLIGHT_MIN_G;
+    var in_second = false;
+    var second_ended = false;
+    var own_factor = 1.0;
+    var own_origin = vec3<f32>(0.0);
+    var own_dir = vec3<f32>(0.0);
+    var own_weight = vec3<f32>(0.0);
+    var own_next = 0u;
+    var own_clock = 0.0;
     // One flight per iteration: from `origin` to the next gate, the next
     // real collision, or the exit of the box, whichever comes first.
     loop {
+        if second_ended {
+            // The walk resumes its own flight from the collision.
+            origin = own_origin;
+            dir = own_dir;
+            weight = own_weight;
+            next = own_next;
+            clock_at_origin = own_clock;
+            in_second = false;
+            second_ended = false;
+        }
         let clip = medium_clip(origin, dir);
         if !clip.hit {
+            if in_second {
+                second_ended = true;
+                continue;
+            }
             return;
         }
         var clock_at_enter = clock_at_origin;
@@ -422,6 +555,11 @@ fn accumulate_j_from(
             flight_end = march.value;
         }
         let flight = free_flight(origin, dir, clip.t0, flight_end, &weight, rng);
+        if flight.hit && in_second {
+            // A second flight ends at its first collision.
+            second_ended = true;
+            continue;
+        }
         if flight.hit {
             let to_hit = march_clock(
                 settings.clock, settings.s_star, origin, dir, clip.t0, clip.t1, flight.t, BIG,
@@ -443,25 +581,54 @@ fn accumulate_j_from(
             }
             let u1 = rng_next_f32(rng);
             let u2 = rng_next_f32(rng);
-            if collisions <= GUIDED_COLLISIONS {
+            let incoming = dir;
+            if collisions <= GUIDED_COLLISIONS && !seconds {
                 let next_dir = guided_direction(scene.medium.g, origin, dir, u1, u2, rng);
                 dir = next_dir.dir;
                 weight *= next_dir.factor;
             } else {
                 dir = sample_hg(scene.medium.g, dir, u1, u2);
             }
-        } else {
-            if all(weight == vec3<f32>(0.0)) {
-                return;
+            own_factor = 1.0;
+            if seconds {
+                let u = rng_next_f32(rng);
+                let v1 = rng_next_f32(rng);
+                let v2 = rng_next_f32(rng);
+                let second = second_flight(origin, incoming, dir, u, v1, v2);
+                if second.valid {
+                    own_factor = second.own_factor;
+                    own_origin = origin;
+                    own_dir = dir;
+                    own_weight = weight;
+                    own_next = next;
+                    own_clock = clock_at_origin;
+                    in_second = true;
+                    dir = second.dir;
+                    weight *= second.factor;
+                }
             }
-            // No gate before the exit: the walk left the box, and nothing
-            // comes back from the vacuum outside it.
-            if !march.reached {
+        } else {
+            // No gate before the exit: the walk (or its second flight) left
+            // the box, and nothing comes back from the vacuum outside it.
+            if all(weight == vec3<f32>(0.0)) || !march.reached {
+                if in_second {
+                    second_ended = true;
+                    continue;
+                }
                 return;
             }
             origin += dir * march.value;
-            gate_add(next, weight, origin, -dir, collisions > 0u, settings, first, rho_z, rng, out);
+            // A second flight's weight carries its factor.
+            var factor = own_factor;
+            if in_second {
+                factor = 1.0;
+            }
+            gate_add(next, weight * factor, origin, -dir, collisions > 0u, settings, first, rho_z, rng, out);
             if next == last {
+                if in_second {
+                    second_ended = true;
+                    continue;
+                }
                 return;
             }
             next += 1u;

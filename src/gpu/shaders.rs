@@ -212,6 +212,8 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!(U32, GUIDED_COLLISIONS in crate::physics::internal::guiding),
     shared!(F32, GUIDE_PROBABILITY in crate::physics::internal::guiding),
     shared!(F32, GUIDE_G in crate::physics::internal::guiding),
+    shared!(F32, SECOND_FLIGHT_MIN_G in crate::physics::internal::guiding),
+    shared!(F32, SECOND_FLIGHT_MAX_DEPTH in crate::physics::internal::guiding),
     shared!(F32, GOLDEN_ANGLE in crate::physics::internal::sources),
     shared!(
         "GATHER_TRANSMITTANCE",

@@ -31,12 +31,14 @@
 //! though the walk carries weight there.
 //!
 //! The clock it is gated by is [`super::clock`]'s, its directions after a
-//! collision are guided by [`super::guiding`].
+//! collision are guided by [`super::guiding`], or, where the phase
+//! function's forward peak is sharp, each collision also takes a second
+//! flight towards a light ([`super::guiding::second_flight`]).
 
 use glam::Vec3;
 
 use super::clock::{march_clock, Clock, ClockLattice, ClockMarch, ClockRay, GateSettings};
-use super::guiding::{guided_direction, GUIDED_COLLISIONS};
+use super::guiding::{guided_direction, second_flight, GUIDED_COLLISIONS, SECOND_FLIGHT_MIN_G};
 use crate::physics::lights::Lights;
 use crate::physics::phase;
 use crate::physics::reference::{gate_scatter_source, roulette};
@@ -73,8 +75,10 @@ pub fn gated_walk<D: DensityField>(
 /// What the walks of one light set share: the medium, the external lights
 /// whose single scatter `S₁` the gates read, the gates, and whether a
 /// walk's directions after its first collisions are guided towards those
-/// lights ([`guided_direction`]) or come from the phase function alone
-/// (both unbiased; the internal lights guide them).
+/// lights ([`guided_direction`]; in a medium of `g` ≥
+/// [`SECOND_FLIGHT_MIN_G`], a second flight towards them at every
+/// collision instead, [`second_flight`]) or come from the phase function
+/// alone (all unbiased; the internal lights guide them).
 pub struct Walks<'a, D> {
     /// The medium.
     pub vol: &'a Volume<D>,
@@ -82,7 +86,8 @@ pub struct Walks<'a, D> {
     pub lights: &'a Lights,
     /// The window, the series truncation and the clock.
     pub gates: GateSettings,
-    /// Whether directions after a collision are guided.
+    /// Whether directions after a collision are guided (or, in a medium of
+    /// `g` ≥ [`SECOND_FLIGHT_MIN_G`], second flights taken).
     pub guided: bool,
 }
 
@@ -409,9 +414,40 @@ fn optical_depth_flight<D: DensityField>(
     }
 }
 
+/// A walk's own state at a collision, kept while the collision's second
+/// flight ([`second_flight`]) runs.
+struct Resume {
+    origin: Vec3,
+    dir: Vec3,
+    weight: Vec3,
+    /// The next gate.
+    next: u32,
+    /// The exact clock at the collision.
+    clock: f32,
+}
+
+impl Resume {
+    /// The walk's position, direction, weight, next gate and clock, to go
+    /// on with its own flight from the collision.
+    fn restore(self) -> (Vec3, Vec3, Vec3, u32, LazyClock) {
+        (
+            self.origin,
+            self.dir,
+            self.weight,
+            self.next,
+            LazyClock::new(self.clock),
+        )
+    }
+}
+
 impl<D: DensityField> Walks<'_, D> {
     /// The walk itself ([`gated_walk`]); when guided, its directions after a
-    /// collision come from [`guided_direction`] towards the lights.
+    /// collision come from [`guided_direction`] towards the lights, or, in a
+    /// medium of `g` ≥ [`SECOND_FLIGHT_MIN_G`], each collision also takes a
+    /// [`second_flight`]: it runs right after the collision, up to its own
+    /// first collision, with the gates on the way weighted by its factor
+    /// (the walk's weight carries it), and then the walk resumes its own
+    /// flight from the collision, whose gates take the other factor.
     /// `on_gate(k, weight, z_k, n_k, scattered, rng)` also learns whether the
     /// walk has collided yet and receives the random stream, so that the
     /// caller can trace shadow rays; `on_collision(clock)`, if given, is
@@ -427,7 +463,8 @@ impl<D: DensityField> Walks<'_, D> {
         mut on_collision: Option<&mut dyn FnMut(f32)>,
     ) {
         let (vol, settings) = (self.vol, &self.gates);
-        let guide = self.guided.then_some(self.lights);
+        let seconds = self.guided && vol.optics.g >= SECOND_FLIGHT_MIN_G;
+        let guide = (self.guided && !seconds).then_some(self.lights);
         let s_star = settings.s_star.max(0.0);
         let last = settings.n_terms;
         let mut weight = Vec3::ONE;
@@ -443,11 +480,22 @@ impl<D: DensityField> Walks<'_, D> {
         // the optical-depth clock.
         let mut lazy = LazyClock::new(0.0);
         let mut collisions = 0u32;
+        // The factor of the gates of the walk's own flight since its last
+        // collision (a second flight's balance weight; 1 without one).
+        let mut own_factor = 1.0f32;
+        // While a second flight runs: the walk's own state at the collision
+        // it resumes from.
+        let mut resume: Option<Resume> = None;
         // One flight per iteration: from `origin` to the next gate, the next
         // real collision, or the exit of the box, whichever comes first.
         loop {
             let Some((t_enter, t_exit)) = vol.clip(origin, dir) else {
-                return;
+                // Leaving the box ends a second flight, or the walk.
+                let Some(own) = resume.take() else {
+                    return;
+                };
+                (origin, dir, weight, next, lazy) = own.restore();
+                continue;
             };
             let clock_at_enter = match settings.clock {
                 Clock::Geometric => lazy.exact + t_enter,
@@ -505,6 +553,16 @@ impl<D: DensityField> Walks<'_, D> {
                     }
                 }
             };
+            // A second flight ends where its flight does (a collision, the
+            // box's exit, its last gate); the walk resumes from its collision.
+            let ends_second = match flight {
+                Flight::Collision { .. } | Flight::Exit => true,
+                Flight::Gate(_) => false,
+            };
+            if let Some(own) = resume.take_if(|_| ends_second) {
+                (origin, dir, weight, next, lazy) = own.restore();
+                continue;
+            }
             match flight {
                 Flight::Collision { t: t_hit, advanced } => {
                     if let Some(advanced) = advanced {
@@ -521,6 +579,7 @@ impl<D: DensityField> Walks<'_, D> {
                         return;
                     }
                     let (u1, u2) = (rng.next_f32(), rng.next_f32());
+                    let incoming = dir;
                     dir = match guide.filter(|_| collisions <= GUIDED_COLLISIONS) {
                         Some(lights) => {
                             let (d, factor) =
@@ -530,16 +589,48 @@ impl<D: DensityField> Walks<'_, D> {
                         }
                         None => phase::sample_hg(vol.optics.g, dir, u1, u2),
                     };
+                    own_factor = 1.0;
+                    if seconds {
+                        let (u, v1, v2) = (rng.next_f32(), rng.next_f32(), rng.next_f32());
+                        let lights = self.lights;
+                        if let Some(second) =
+                            second_flight(vol, lights, origin, incoming, dir, u, v1, v2)
+                        {
+                            // The second flight starts from the exact clock.
+                            let clock = lazy.resolve(vol).min(gate_clock);
+                            own_factor = second.own_factor;
+                            resume = Some(Resume {
+                                origin,
+                                dir,
+                                weight,
+                                next,
+                                clock,
+                            });
+                            dir = second.dir;
+                            weight *= second.factor;
+                            lazy = LazyClock::new(clock);
+                        }
+                    }
                 }
                 Flight::Exit => return,
                 Flight::Gate(t) => {
                     if weight == Vec3::ZERO {
-                        return;
+                        let Some(own) = resume.take() else {
+                            return;
+                        };
+                        (origin, dir, weight, next, lazy) = own.restore();
+                        continue;
                     }
                     origin += dir * t;
-                    on_gate(next, weight, origin, -dir, collisions > 0, rng);
+                    // A second flight's weight carries its factor.
+                    let factor = if resume.is_some() { 1.0 } else { own_factor };
+                    on_gate(next, weight * factor, origin, -dir, collisions > 0, rng);
                     if next == last {
-                        return;
+                        let Some(own) = resume.take() else {
+                            return;
+                        };
+                        (origin, dir, weight, next, lazy) = own.restore();
+                        continue;
                     }
                     next += 1;
                     // The flight goes on from the gate: flights are memoryless,
