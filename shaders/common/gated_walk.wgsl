@@ -531,14 +531,26 @@ fn accumulate_j_from(
             clock_at_enter = clock_at_origin + clip.t0;
         }
         // Gates in the vacuum before the box (only when `z` is outside it,
-        // and only for the geometric clock).
+        // and only for the geometric clock), or at a flight's start where
+        // rounding put the clock on the gate.
         while geometric && f32(next) * s_star <= clock_at_enter {
             let t = f32(next) * s_star - clock_at_origin;
-            gate_add(next, weight, origin + dir * t, -dir, collisions > 0u, settings, first, rho_z, rng, out);
+            var factor = own_factor;
+            if in_second {
+                factor = 1.0;
+            }
+            gate_add(next, weight * factor, origin + dir * t, -dir, collisions > 0u, settings, first, rho_z, rng, out);
             if next == last {
+                if in_second {
+                    second_ended = true;
+                    break;
+                }
                 return;
             }
             next += 1u;
+        }
+        if second_ended {
+            continue;
         }
         let gate_clock = f32(next) * s_star;
         let budget = gate_clock - clock_at_enter;

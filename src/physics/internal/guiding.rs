@@ -253,21 +253,25 @@ pub fn second_flight<D: DensityField>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::physics::internal::clock::Clock;
     use crate::physics::internal::walk::Walks;
     use crate::physics::testing::*;
 
     /// The mean of `f` over `walks` walks and its variance, from
-    /// [`forward_scattering_walk`] with the phase function's `g` and a
-    /// point light beside its sun: plain walks (directions from the phase
-    /// function alone) first, then the internal lights' ([`Walks::guided`]).
+    /// [`forward_scattering_walk`] with the phase function's `g`, the
+    /// `clock` and a point light beside its sun: plain walks (directions
+    /// from the phase function alone) first, then the internal lights'
+    /// ([`Walks::guided`]).
     fn plain_then_lights_walks(
         g: f32,
+        clock: Clock,
         walks: u32,
         seed: u64,
         f: impl Fn(&Walks<Field>, Vec3, Vec3, &mut Rng) -> Vec3,
     ) -> [(Vec3, Vec3); 2] {
-        let (mut vol, mut lights, settings, z, n) = forward_scattering_walk();
+        let (mut vol, mut lights, mut settings, z, n) = forward_scattering_walk();
         vol.optics.g = g;
+        settings.clock = clock;
         lights.points.push(crate::physics::lights::PointLight {
             position: Vec3::new(-2.0, 0.5, 1.5),
             intensity: Vec3::splat(4.0),
@@ -293,9 +297,10 @@ mod tests {
     fn guided_walks_keep_the_mean() {
         let g = forward_scattering_walk().0.optics.g;
         assert!(g < SECOND_FLIGHT_MIN_G);
-        let [(m0, v0), (m1, v1)] = plain_then_lights_walks(g, 400_000, 21, |walks, z, n, rng| {
-            split_walk(walks, z, n, rng).0
-        });
+        let [(m0, v0), (m1, v1)] =
+            plain_then_lights_walks(g, Clock::OpticalDepth, 400_000, 21, |walks, z, n, rng| {
+                split_walk(walks, z, n, rng).0
+            });
         for c in 0..3 {
             let se = (v0[c] + v1[c]).sqrt();
             assert!(
@@ -360,44 +365,48 @@ mod tests {
 
     /// Second flights (a medium of `g` 0.85, so the guided walks take them,
     /// lit by a sun and a point light) change the walks' spread, not their
-    /// mean: the collided part summed over `k ≥ 1`, of term 1 (`F`) alone
-    /// and of the terms from 4 on agree with the plain walks' (directions
+    /// mean, with either clock: the collided part summed over `k ≥ 1`, of
+    /// term 1 (`F`) alone and of the terms from 4 on agree with the plain walks' (directions
     /// from the phase function alone, no second flight) within 4.5
     /// standard errors of the difference, and the sum is less spread.
     #[test]
     fn second_flights_keep_the_mean() {
         let g = 0.85;
         assert!(g >= SECOND_FLIGHT_MIN_G);
-        let [(m0, v0), (m1, v1)] = plain_then_lights_walks(g, 1_000_000, 23, |walks, z, n, rng| {
-            let slots = walks.gates.term_slots();
-            let (mut out, mut unscattered) = (vec![Vec3::ZERO; slots], vec![Vec3::ZERO; slots]);
-            walks.accumulate_j_from(z, n, 1, rng, &mut out, Some(&mut unscattered));
-            let collided: Vec<f32> = out
-                .iter()
-                .zip(&unscattered)
-                .map(|(o, u)| (*o - *u).element_sum() / 3.0)
-                .collect();
-            Vec3::new(
-                collided[1..].iter().sum(),
-                collided[1],
-                collided[4..].iter().sum(),
-            )
-        });
-        for (c, part) in ["the sum", "term 1", "terms from 4"].iter().enumerate() {
-            let se = (v0[c] + v1[c]).sqrt();
-            assert!(
-                (m0[c] - m1[c]).abs() < 4.5 * se,
-                "{part}: plain {} with second flights {} (se {se})",
-                m0[c],
-                m1[c]
+        for clock in [Clock::OpticalDepth, Clock::Geometric] {
+            let [(m0, v0), (m1, v1)] =
+                plain_then_lights_walks(g, clock, 1_000_000, 23, |walks, z, n, rng| {
+                    let slots = walks.gates.term_slots();
+                    let (mut out, mut unscattered) =
+                        (vec![Vec3::ZERO; slots], vec![Vec3::ZERO; slots]);
+                    walks.accumulate_j_from(z, n, 1, rng, &mut out, Some(&mut unscattered));
+                    let collided: Vec<f32> = out
+                        .iter()
+                        .zip(&unscattered)
+                        .map(|(o, u)| (*o - *u).element_sum() / 3.0)
+                        .collect();
+                    Vec3::new(
+                        collided[1..].iter().sum(),
+                        collided[1],
+                        collided[4..].iter().sum(),
+                    )
+                });
+            for (c, part) in ["the sum", "term 1", "terms from 4"].iter().enumerate() {
+                let se = (v0[c] + v1[c]).sqrt();
+                assert!(
+                    (m0[c] - m1[c]).abs() < 4.5 * se,
+                    "{clock:?}, {part}: plain {} with second flights {} (se {se})",
+                    m0[c],
+                    m1[c]
+                );
+                assert!(m0[c] > 10.0 * se, "{clock:?}, {part}: too noisy to compare");
+            }
+            eprintln!(
+                "{clock:?}: plain {m0} ± {:?}, second flights {m1} ± {:?}",
+                v0.to_array().map(f32::sqrt),
+                v1.to_array().map(f32::sqrt)
             );
-            assert!(m0[c] > 10.0 * se, "{part}: too noisy to compare");
+            assert!(v1.x < v0.x, "{clock:?}: variance {} against {}", v1.x, v0.x);
         }
-        eprintln!(
-            "plain {m0} ± {:?}, second flights {m1} ± {:?}",
-            v0.to_array().map(f32::sqrt),
-            v1.to_array().map(f32::sqrt)
-        );
-        assert!(v1.x < v0.x, "variance {} against {}", v1.x, v0.x);
     }
 }

@@ -488,7 +488,7 @@ impl<D: DensityField> Walks<'_, D> {
         let mut resume: Option<Resume> = None;
         // One flight per iteration: from `origin` to the next gate, the next
         // real collision, or the exit of the box, whichever comes first.
-        loop {
+        'flights: loop {
             let Some((t_enter, t_exit)) = vol.clip(origin, dir) else {
                 // Leaving the box ends a second flight, or the walk.
                 let Some(own) = resume.take() else {
@@ -502,12 +502,25 @@ impl<D: DensityField> Walks<'_, D> {
                 Clock::OpticalDepth => lazy.exact,
             };
             // Gates in the vacuum before the box (only when `z` is outside it,
-            // and only for the geometric clock).
+            // and only for the geometric clock), or at a flight's start where
+            // rounding put the clock on the gate.
             while settings.clock == Clock::Geometric && next as f32 * s_star <= clock_at_enter {
                 let t = next as f32 * s_star - lazy.exact;
-                on_gate(next, weight, origin + dir * t, -dir, collisions > 0, rng);
+                let factor = if resume.is_some() { 1.0 } else { own_factor };
+                on_gate(
+                    next,
+                    weight * factor,
+                    origin + dir * t,
+                    -dir,
+                    collisions > 0,
+                    rng,
+                );
                 if next == last {
-                    return;
+                    let Some(own) = resume.take() else {
+                        return;
+                    };
+                    (origin, dir, weight, next, lazy) = own.restore();
+                    continue 'flights;
                 }
                 next += 1;
             }
