@@ -240,6 +240,52 @@ var<private> walk_collided_only: bool;
 // `GUIDE_G`, from Rust (the generated prelude:
 // crate::physics::gated_walk::{GUIDE_PROBABILITY, GUIDE_G}).
 
+// The external lights' unshadowed irradiance at `p` summed (largest
+// channel of each): `irradiance_total` (src/physics/internal/guiding.rs),
+// whose `None` is a sum not above 0 or above 1e38 here.
+fn irradiance_total(p: vec3<f32>) -> f32 {
+    let count = light_count();
+    var total = 0.0;
+    for (var i = 0u; i < count; i++) {
+        total += max(max_element(light_at(i, p).irradiance), 0.0);
+    }
+    return total;
+}
+
+// The external light chosen at `p` in proportion to its unshadowed
+// irradiance by `u` in [0, 1), `total` being `irradiance_total`'s
+// (`light_by_irradiance`): the first whose share holds `u · total`, or the
+// last that shines where rounding leaves it past the end.
+struct ChosenLight {
+    found: bool,
+    light: LightSample,
+}
+
+fn light_by_irradiance(p: vec3<f32>, total: f32, u: f32) -> ChosenLight {
+    var pick = u * total;
+    var chosen: ChosenLight;
+    chosen.found = false;
+    var has_last = false;
+    var last: LightSample;
+    let count = light_count();
+    for (var i = 0u; i < count; i++) {
+        let l = light_at(i, p);
+        let w = max(max_element(l.irradiance), 0.0);
+        if w > 0.0 {
+            last = l;
+            has_last = true;
+            if !chosen.found && pick < w {
+                chosen = ChosenLight(true, l);
+            }
+            pick -= w;
+        }
+    }
+    if !chosen.found && has_last {
+        chosen = ChosenLight(true, last);
+    }
+    return chosen;
+}
+
 // A walk's next direction and the factor its weight takes.
 struct GuidedDirection {
     dir: vec3<f32>,
@@ -262,10 +308,7 @@ fn guided_direction(
     rng: ptr<function, Rng>,
 ) -> GuidedDirection {
     let count = light_count();
-    var total = 0.0;
-    for (var i = 0u; i < count; i++) {
-        total += max(max_element(light_at(i, p).irradiance), 0.0);
-    }
+    let total = irradiance_total(p);
     if !(total > 0.0) || total > 1.0e38 {
         return GuidedDirection(sample_hg(g, dir, u1, u2), 1.0);
     }
@@ -273,32 +316,9 @@ fn guided_direction(
     var next = sample_hg(g, dir, u1, u2);
     if u < GUIDE_PROBABILITY {
         // A light in proportion to its irradiance, then its lobe.
-        var pick = u / GUIDE_PROBABILITY * total;
-        var found = false;
-        var towards = vec3<f32>(0.0);
-        var last = vec3<f32>(0.0);
-        var has_last = false;
-        for (var i = 0u; i < count; i++) {
-            let l = light_at(i, p);
-            let w = max(max_element(l.irradiance), 0.0);
-            if w > 0.0 {
-                last = -l.travel;
-                has_last = true;
-                if !found {
-                    if pick < w {
-                        towards = -l.travel;
-                        found = true;
-                    }
-                    pick -= w;
-                }
-            }
-        }
-        if !found && has_last {
-            towards = last;
-            found = true;
-        }
-        if found {
-            next = sample_hg(GUIDE_G, towards, u1, u2);
+        let chosen = light_by_irradiance(p, total, u / GUIDE_PROBABILITY);
+        if chosen.found {
+            next = sample_hg(GUIDE_G, -chosen.light.travel, u1, u2);
         }
     }
     let p_phase = hg(g, dot(dir, next));
@@ -358,40 +378,15 @@ fn second_flight(
 ) -> SecondFlight {
     var none: SecondFlight;
     none.valid = false;
-    let count = light_count();
-    var total = 0.0;
-    for (var i = 0u; i < count; i++) {
-        total += max(max_element(light_at(i, p).irradiance), 0.0);
-    }
+    let total = irradiance_total(p);
     if !(total > 0.0) || total > 1.0e38 {
         return none;
     }
-    // A light in proportion to its irradiance (the last one that shines
-    // where rounding leaves `pick` past the end).
-    var pick = u * total;
-    var found = false;
-    var light: LightSample;
-    var has_last = false;
-    var last: LightSample;
-    for (var i = 0u; i < count; i++) {
-        let l = light_at(i, p);
-        let w = max(max_element(l.irradiance), 0.0);
-        if w > 0.0 {
-            last = l;
-            has_last = true;
-            if !found && pick < w {
-                light = l;
-                found = true;
-            }
-            pick -= w;
-        }
+    let chosen = light_by_irradiance(p, total, u);
+    if !chosen.found {
+        return none;
     }
-    if !found {
-        if !has_last {
-            return none;
-        }
-        light = last;
-    }
+    let light = chosen.light;
     let towards = -light.travel;
     let clip = medium_clip(p, towards);
     if !clip.hit {

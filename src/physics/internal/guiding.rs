@@ -32,7 +32,7 @@
 
 use glam::Vec3;
 
-use crate::physics::lights::Lights;
+use crate::physics::lights::{LightSample, Lights};
 use crate::physics::phase;
 use crate::physics::rng::Rng;
 use crate::physics::volume::{DensityField, Volume};
@@ -65,6 +65,36 @@ pub const GUIDE_G: f32 = 0.5;
 /// block RMSE 3.6 % either way).
 pub const GUIDED_COLLISIONS: u32 = 2;
 
+/// The external lights' unshadowed irradiance at `p` summed (largest
+/// channel of each), or `None` where none shines (or the sum is not
+/// finite): what [`guided_direction`] and [`second_flight`] choose a
+/// light in proportion to.
+fn irradiance_total(lights: &Lights, p: Vec3) -> Option<f32> {
+    let mut total = 0.0f32;
+    lights.for_each_at(p, |l| total += l.irradiance.max_element().max(0.0));
+    (total > 0.0 && total.is_finite()).then_some(total)
+}
+
+/// The external light chosen at `p` in proportion to its unshadowed
+/// irradiance by `u ∈ [0, 1)`, `total` being [`irradiance_total`]: the
+/// first whose share holds `u · total`, or the last that shines where
+/// rounding leaves it past the end.
+fn light_by_irradiance(lights: &Lights, p: Vec3, total: f32, u: f32) -> Option<LightSample> {
+    let mut pick = u * total;
+    let (mut chosen, mut last) = (None, None);
+    lights.for_each_at(p, |l| {
+        let w = l.irradiance.max_element().max(0.0);
+        if w > 0.0 {
+            last = Some(l);
+            if chosen.is_none() && pick < w {
+                chosen = Some(l);
+            }
+            pick -= w;
+        }
+    });
+    chosen.or(last)
+}
+
 /// A backward walk's next direction after a collision at `p`, coming in
 /// along `dir`, and the factor its weight takes: with probability
 /// `1 − q` (`q` = [`GUIDE_PROBABILITY`]) from the phase function about
@@ -84,31 +114,14 @@ pub fn guided_direction(
     u2: f32,
     rng: &mut Rng,
 ) -> (Vec3, f32) {
-    let mut total = 0.0f32;
-    lights.for_each_at(p, |l| total += l.irradiance.max_element().max(0.0));
-    if !(total > 0.0 && total.is_finite()) {
+    let Some(total) = irradiance_total(lights, p) else {
         return (phase::sample_hg(g, dir, u1, u2), 1.0);
-    }
+    };
     let u = rng.next_f32();
     let next = if u < GUIDE_PROBABILITY {
         // A light in proportion to its irradiance, then its lobe.
-        let mut pick = u / GUIDE_PROBABILITY * total;
-        let mut towards = None;
-        let mut last = None;
-        lights.for_each_at(p, |l| {
-            let w = l.irradiance.max_element().max(0.0);
-            if w > 0.0 {
-                last = Some(-l.travel);
-                if towards.is_none() {
-                    if pick < w {
-                        towards = Some(-l.travel);
-                    }
-                    pick -= w;
-                }
-            }
-        });
-        match towards.or(last) {
-            Some(t) => phase::sample_hg(GUIDE_G, t, u1, u2),
+        match light_by_irradiance(lights, p, total, u / GUIDE_PROBABILITY) {
+            Some(l) => phase::sample_hg(GUIDE_G, -l.travel, u1, u2),
             None => phase::sample_hg(g, dir, u1, u2),
         }
     } else {
@@ -196,26 +209,8 @@ pub fn second_flight<D: DensityField>(
     u1: f32,
     u2: f32,
 ) -> Option<SecondFlight> {
-    let mut total = 0.0f32;
-    lights.for_each_at(p, |l| total += l.irradiance.max_element().max(0.0));
-    if !(total > 0.0 && total.is_finite()) {
-        return None;
-    }
-    // A light in proportion to its irradiance (the last one that shines
-    // where rounding leaves `pick` past the end).
-    let mut pick = u * total;
-    let (mut chosen, mut last) = (None, None);
-    lights.for_each_at(p, |l| {
-        let w = l.irradiance.max_element().max(0.0);
-        if w > 0.0 {
-            last = Some(l);
-            if chosen.is_none() && pick < w {
-                chosen = Some(l);
-            }
-            pick -= w;
-        }
-    });
-    let light = chosen.or(last)?;
+    let total = irradiance_total(lights, p)?;
+    let light = light_by_irradiance(lights, p, total, u)?;
     let towards = -light.travel;
     let (t_enter, t_exit) = vol.clip(p, towards)?;
     let mut depth = 0.0f32;
