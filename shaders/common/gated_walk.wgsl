@@ -450,6 +450,17 @@ fn gate_add(
     }
 }
 
+// A walk's own state at a collision, kept while the collision's second
+// flight runs (`Resume` on the CPU): position, direction, weight, next
+// gate and clock.
+struct OwnFlight {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    weight: vec3<f32>,
+    next: u32,
+    clock: f32,
+}
+
 // Adds one walk's estimate of `Ĵ_k(z, n)`, `k = first..=N`, to `out`
 // (`accumulate_j_from`, with the walk of `walk` inlined): a backward walk
 // from `z` along `−n` by spectral tracking, albedo and Russian roulette at
@@ -490,26 +501,22 @@ fn accumulate_j_from(
     // Second flights (`second_flight`): whether they are taken, whether one
     // runs, whether it has just ended, and the factor of the gates of the
     // walk's own flight since its last collision. While one runs, the walk's
-    // own state at the collision waits in `own_*`.
+    // own state at the collision waits in `own`.
     let seconds = scene.medium.g >= SECOND_FLIGHT_MIN_G;
     var in_second = false;
     var second_ended = false;
     var own_factor = 1.0;
-    var own_origin = vec3<f32>(0.0);
-    var own_dir = vec3<f32>(0.0);
-    var own_weight = vec3<f32>(0.0);
-    var own_next = 0u;
-    var own_clock = 0.0;
+    var own: OwnFlight;
     // One flight per iteration: from `origin` to the next gate, the next
     // real collision, or the exit of the box, whichever comes first.
     loop {
         if second_ended {
             // The walk resumes its own flight from the collision.
-            origin = own_origin;
-            dir = own_dir;
-            weight = own_weight;
-            next = own_next;
-            clock_at_origin = own_clock;
+            origin = own.origin;
+            dir = own.dir;
+            weight = own.weight;
+            next = own.next;
+            clock_at_origin = own.clock;
             in_second = false;
             second_ended = false;
         }
@@ -604,11 +611,7 @@ fn accumulate_j_from(
                 let second = second_flight(origin, incoming, dir, u, v1, v2);
                 if second.valid {
                     own_factor = second.own_factor;
-                    own_origin = origin;
-                    own_dir = dir;
-                    own_weight = weight;
-                    own_next = next;
-                    own_clock = clock_at_origin;
+                    own = OwnFlight(origin, dir, weight, next, clock_at_origin);
                     in_second = true;
                     dir = second.dir;
                     weight *= second.factor;

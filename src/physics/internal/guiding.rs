@@ -282,6 +282,31 @@ mod tests {
         })
     }
 
+    /// Asserts that the internal lights' walks (`what`) keep the plain
+    /// walks' mean in each of the three `parts` of [`plain_then_lights_walks`]'s
+    /// `stats` (within 4.5 standard errors of the difference, the plain
+    /// mean at least 10 of them: precise enough to tell) and spread the
+    /// first part less.
+    fn assert_same_means_less_spread(what: &str, parts: [&str; 3], stats: [(Vec3, Vec3); 2]) {
+        let [(m0, v0), (m1, v1)] = stats;
+        for (c, part) in parts.iter().enumerate() {
+            let se = (v0[c] + v1[c]).sqrt();
+            assert!(
+                (m0[c] - m1[c]).abs() < 4.5 * se,
+                "{what}, {part}: plain {} against {} (se {se})",
+                m0[c],
+                m1[c]
+            );
+            assert!(m0[c] > 10.0 * se, "{what}, {part}: too noisy to compare");
+        }
+        eprintln!(
+            "{what}: plain {m0} ± {:?}, {m1} ± {:?}",
+            v0.to_array().map(f32::sqrt),
+            v1.to_array().map(f32::sqrt)
+        );
+        assert!(v1.x < v0.x, "{what}: variance {} against {}", v1.x, v0.x);
+    }
+
     /// Guiding the walks towards the light changes their spread, not their
     /// mean: in a bounded, forward-scattering, heterogeneous medium lit by
     /// a sun and a point light, the collided part of every term agrees
@@ -292,26 +317,11 @@ mod tests {
     fn guided_walks_keep_the_mean() {
         let g = forward_scattering_walk().0.optics.g;
         assert!(g < SECOND_FLIGHT_MIN_G);
-        let [(m0, v0), (m1, v1)] =
+        let stats =
             plain_then_lights_walks(g, Clock::OpticalDepth, 400_000, 21, |walks, z, n, rng| {
                 split_walk(walks, z, n, rng).0
             });
-        for c in 0..3 {
-            let se = (v0[c] + v1[c]).sqrt();
-            assert!(
-                (m0[c] - m1[c]).abs() < 4.5 * se,
-                "channel {c}: unguided {} guided {} (se {se})",
-                m0[c],
-                m1[c]
-            );
-            assert!(m0[c] > 10.0 * se, "channel {c}: too noisy to compare");
-        }
-        eprintln!(
-            "unguided {m0} ± {}, guided {m1} ± {}",
-            v0.x.sqrt(),
-            v1.x.sqrt()
-        );
-        assert!(v1.x < v0.x, "guided variance {} against {}", v1.x, v0.x);
+        assert_same_means_less_spread("guided", ["red", "green", "blue"], stats);
     }
 
     /// The second flight goes only where the light can still reach, and
@@ -369,39 +379,26 @@ mod tests {
         let g = 0.85;
         assert!(g >= SECOND_FLIGHT_MIN_G);
         for clock in [Clock::OpticalDepth, Clock::Geometric] {
-            let [(m0, v0), (m1, v1)] =
-                plain_then_lights_walks(g, clock, 1_000_000, 23, |walks, z, n, rng| {
-                    let slots = walks.gates.term_slots();
-                    let (mut out, mut unscattered) =
-                        (vec![Vec3::ZERO; slots], vec![Vec3::ZERO; slots]);
-                    walks.accumulate_j_from(z, n, 1, rng, &mut out, Some(&mut unscattered));
-                    let collided: Vec<f32> = out
-                        .iter()
-                        .zip(&unscattered)
-                        .map(|(o, u)| (*o - *u).element_sum() / 3.0)
-                        .collect();
-                    Vec3::new(
-                        collided[1..].iter().sum(),
-                        collided[1],
-                        collided[4..].iter().sum(),
-                    )
-                });
-            for (c, part) in ["the sum", "term 1", "terms from 4"].iter().enumerate() {
-                let se = (v0[c] + v1[c]).sqrt();
-                assert!(
-                    (m0[c] - m1[c]).abs() < 4.5 * se,
-                    "{clock:?}, {part}: plain {} with second flights {} (se {se})",
-                    m0[c],
-                    m1[c]
-                );
-                assert!(m0[c] > 10.0 * se, "{clock:?}, {part}: too noisy to compare");
-            }
-            eprintln!(
-                "{clock:?}: plain {m0} ± {:?}, second flights {m1} ± {:?}",
-                v0.to_array().map(f32::sqrt),
-                v1.to_array().map(f32::sqrt)
+            let stats = plain_then_lights_walks(g, clock, 1_000_000, 23, |walks, z, n, rng| {
+                let slots = walks.gates.term_slots();
+                let (mut out, mut unscattered) = (vec![Vec3::ZERO; slots], vec![Vec3::ZERO; slots]);
+                walks.accumulate_j_from(z, n, 1, rng, &mut out, Some(&mut unscattered));
+                let collided: Vec<f32> = out
+                    .iter()
+                    .zip(&unscattered)
+                    .map(|(o, u)| (*o - *u).element_sum() / 3.0)
+                    .collect();
+                Vec3::new(
+                    collided[1..].iter().sum(),
+                    collided[1],
+                    collided[4..].iter().sum(),
+                )
+            });
+            assert_same_means_less_spread(
+                &format!("{clock:?}, second flights"),
+                ["the sum", "term 1", "terms from 4"],
+                stats,
             );
-            assert!(v1.x < v0.x, "{clock:?}: variance {} against {}", v1.x, v0.x);
         }
     }
 }
