@@ -7,11 +7,18 @@
 //! other than the converged image's; the clock starts before the renderer
 //! is built (the internal lights' placement and walks are paid for) and is
 //! paused while the image is measured. At each time `T` of `--times` the
-//! internal-lights image is taken at the end of its first pass at or past
-//! `T` (so at most one pass more), and the reference's at the end of its
-//! first pass at or past the time that took (its passes last milliseconds):
-//! both have run the same wall time, however long an internal-lights pass
-//! is. Each image is compared with the converged one:
+//! internal-lights image is that of a render of its own with `T` as its
+//! time limit, as `lantern render --time T` makes it (its light sets are
+//! scheduled against that limit: a first set's walks cut short where a
+//! whole set would not leave time for a pass, the set in hand run on near
+//! the limit), taken at the end of its first pass at or past `T` (so at
+//! most one pass more); the reference renders once, its image taken at
+//! the end of its first pass at or past the time each of those took (its
+//! passes last milliseconds): both have run the same wall time, however
+//! long an internal-lights pass is. On the GPU (`--backend gpu`, whose
+//! sets are walked whole) the internal lights render once too, each
+//! time's snapshot on the way, the set in hand run on near each. Each
+//! image is compared with the converged one:
 //!
 //! - the error of the image mean per channel, `mean(a)/mean(c) − 1`, signed
 //!   (the converged mean's own standard error, printed above each table,
@@ -44,7 +51,7 @@ use crate::cpu::{Passes, Renderer};
 use crate::gpu::GpuContext;
 use crate::render::export::{read_exr, read_exr_metadata, RgbImage};
 use crate::render::film::image_mean;
-use crate::render::renewal::BalancedRenewal;
+use crate::render::renewal::{BalancedRenewal, FIRST_SET_SHARE};
 use crate::render::stats::{block_rmse_against, compare, rmse_against, BLOCK};
 use crate::render::{Film, PreparedScene};
 use crate::scene::{Method, RenderSettings};
@@ -171,9 +178,32 @@ impl Truth<'_> {
     }
 }
 
-/// Renders progressively with `settings` and measures the image at each of
-/// `times` (ascending), as the module says.
+/// Measures the image at each of `times` (ascending), as the module says:
+/// for the internal lights a render of its own to each time, for the
+/// reference one render with a snapshot at each.
 fn snapshots(
+    prepared: &Arc<PreparedScene>,
+    settings: &RenderSettings,
+    times: &[f64],
+    truth: &Truth<'_>,
+    label: &str,
+    balanced: bool,
+) -> Result<Vec<Snapshot>> {
+    if settings.method == Method::Internal {
+        let mut out = Vec::with_capacity(times.len());
+        for &t in times {
+            out.extend(render_to(prepared, settings, &[t], truth, label, balanced)?);
+        }
+        return Ok(out);
+    }
+    render_to(prepared, settings, times, truth, label, balanced)
+}
+
+/// Renders progressively with `settings` to the last of `times`
+/// (ascending) and measures the image at each: the light sets are
+/// scheduled against the first as the render's time limit, then against
+/// each next.
+fn render_to(
     prepared: &Arc<PreparedScene>,
     settings: &RenderSettings,
     times: &[f64],
@@ -183,8 +213,13 @@ fn snapshots(
 ) -> Result<Vec<Snapshot>> {
     let never = AtomicBool::new(false);
     let start = Instant::now();
-    let renderer =
-        Renderer::new(prepared.clone(), settings, &never).context("render was cancelled")?;
+    // As `lantern render --time` with the first time as its limit: set 0's
+    // walks stop where a whole set would leave no time for its passes.
+    let walk_deadline = times
+        .first()
+        .map(|&t| start + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)));
+    let renderer = Renderer::new_within(prepared.clone(), settings, &never, walk_deadline)
+        .context("render was cancelled")?;
     let mut elapsed = start.elapsed();
     let mut passes = Passes::new(&renderer, balanced, elapsed.as_secs_f64());
     let cam = prepared.camera;
@@ -195,8 +230,9 @@ fn snapshots(
         let due = Duration::from_secs_f64(target);
         while pass == 0 || elapsed < due {
             let start = Instant::now();
+            let remaining = due.saturating_sub(elapsed).as_secs_f64();
             let img = passes
-                .next(&renderer, &never)
+                .next_within(&renderer, &never, Some(remaining))
                 .context("render was cancelled")?;
             film.add_pass(&img.total);
             elapsed += start.elapsed();
@@ -243,7 +279,14 @@ fn gpu_snapshots(
         let due = Duration::from_secs_f64(target);
         while passes.passes() == 0 || elapsed < due {
             let start = Instant::now();
-            passes.next(&mut renderer, prepared, settings, LightBuilder::Gpu(ctx))?;
+            let remaining = Some(due.saturating_sub(elapsed).as_secs_f64());
+            passes.next_within(
+                &mut renderer,
+                prepared,
+                settings,
+                LightBuilder::Gpu(ctx),
+                remaining,
+            )?;
             // (A balanced schedule has waited for the pass already.)
             renderer.finish()?;
             elapsed += start.elapsed();

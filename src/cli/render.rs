@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -16,7 +16,7 @@ use super::support::{gpu_context, gpu_renderer, warn_cut_short};
 use crate::cpu::{Passes, Renderer};
 use crate::render::export::{write_exr_with_metadata, write_image};
 use crate::render::film::image_mean;
-use crate::render::renewal::BalancedRenewal;
+use crate::render::renewal::{BalancedRenewal, FIRST_SET_SHARE};
 use crate::render::tonemap::ViewTransform;
 use crate::render::{internal_params, Film, PreparedScene};
 use crate::scene::{Method, RenderSettings, Scene};
@@ -64,7 +64,9 @@ pub struct RenderArgs {
 /// When a progressive render stops: after `max_spp` passes, or once
 /// `seconds` are spent, whichever comes first; the first pass is always
 /// rendered, and a pass once begun is finished (a render overshoots its
-/// time by at most one pass).
+/// time by at most one pass: near the limit a balanced schedule keeps the
+/// light set in hand rather than build one it could not use,
+/// [`crate::render::renewal::BalancedRenewal::fresh_set_pays`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StopRule {
     /// At most this many passes (`None`: only the time limits).
@@ -84,6 +86,12 @@ impl StopRule {
             return false;
         }
         self.seconds.is_none_or(|s| elapsed < s)
+    }
+
+    /// Seconds left before the time limit after `elapsed` (`None`: no time
+    /// limit), which the balanced light sets are scheduled against.
+    pub fn remaining(&self, elapsed: f64) -> Option<f64> {
+        self.seconds.map(|s| s - elapsed)
     }
 }
 
@@ -235,16 +243,24 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let t_build = Instant::now();
     let never = AtomicBool::new(false);
-    let renderer = Renderer::new(prepared.clone(), &settings, &never)
+    // With a time limit, set 0's walks stop early where a whole set would
+    // leave no time for its passes.
+    let walk_deadline = timed
+        .time
+        .map(|t| t_build + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)));
+    let renderer = Renderer::new_within(prepared.clone(), &settings, &never, walk_deadline)
         .context("internal-light build was cancelled")?;
     let build_secs = t_build.elapsed().as_secs_f64();
     if let Some(lights) = renderer.internal_lights() {
+        let walks = match (lights.walked, lights.params.walks) {
+            (done, k) if done < k => format!("{k} ({done} walked before the time limit)"),
+            (_, k) => k.to_string(),
+        };
         println!(
-            "internal lights: M = {}, s* = {:.4}, N = {}, K = {}, h = {:.4}, clock {:?}: placed in {:.3} s, walked in {:.3} s",
+            "internal lights: M = {}, s* = {:.4}, N = {}, K = {walks}, h = {:.4}, clock {:?}: placed in {:.3} s, walked in {:.3} s",
             lights.len(),
             lights.s_star,
             lights.params.terms,
-            lights.params.walks,
             lights.kernel_radius,
             lights.params.clock,
             lights.timings.placement,
@@ -260,8 +276,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let balanced = timed.time.is_some() && !timed.fixed_renewal;
     let mut passes = Passes::new(&renderer, balanced, build_secs);
     while rule.another(passes.passes(), t_build.elapsed().as_secs_f64()) {
+        let remaining = rule.remaining(t_build.elapsed().as_secs_f64());
         let img = passes
-            .next(&renderer, &never)
+            .next_within(&renderer, &never, remaining)
             .context("render was cancelled")?;
         film.add_pass(&img.total);
         single.add_pass(&img.single);
@@ -427,9 +444,14 @@ fn print_sets(
                     e.pass_variance, e.set_variance, e.pass_secs, e.set_secs
                 )
             });
+            let length = match (b.passes_in_set(), b.period()) {
+                (n, p) if n > p => {
+                    format!("{n} passes long (run on to the time limit; its period {p})")
+                }
+                (_, p) => format!("{p} passes long"),
+            };
             println!(
-                "{sets} more light sets, balanced against the passes: the last {} passes long{estimates}, its kernel of {} lights ({}){extra}",
-                b.period(),
+                "{sets} more light sets, balanced against the passes: the last {length}{estimates}, its kernel of {} lights ({}){extra}",
                 b.kernel_neighbours(),
                 b.kernel_reason()
             );
@@ -466,7 +488,9 @@ fn render_gpu(
         // A fresh light set when the pass starts one, walked on the GPU
         // like the first.
         let t = Instant::now();
-        let renewal = passes.next(&mut renderer, prepared, settings, LightBuilder::Gpu(&ctx))?;
+        let remaining = rule.remaining(t_build.elapsed().as_secs_f64());
+        let builder = LightBuilder::Gpu(&ctx);
+        let renewal = passes.next_within(&mut renderer, prepared, settings, builder, remaining)?;
         if let Renewal::Renewed(_) = renewal {
             resample_secs += t.elapsed().as_secs_f64();
         }

@@ -57,10 +57,26 @@ impl Renderer {
         settings: &RenderSettings,
         cancel: &AtomicBool,
     ) -> Option<Self> {
+        Self::new_within(prepared, settings, cancel, None)
+    }
+
+    /// [`Renderer::new`] whose first light set's walks stop after the
+    /// round that ends past `walk_deadline`
+    /// ([`InternalParams::walk_deadline`]): a render with a time limit
+    /// shorter than a whole set's walks gets its first pass in time.
+    pub fn new_within(
+        prepared: Arc<PreparedScene>,
+        settings: &RenderSettings,
+        cancel: &AtomicBool,
+        walk_deadline: Option<Instant>,
+    ) -> Option<Self> {
         let internal = match settings.method {
             Method::Reference => None,
             Method::Internal => {
-                let params = internal_params(&prepared, settings);
+                let params = InternalParams {
+                    walk_deadline,
+                    ..internal_params(&prepared, settings)
+                };
                 Some(Arc::new(prepared.build_internal_lights(&params, cancel)?))
             }
         };
@@ -261,14 +277,19 @@ impl Passes {
     /// Passes of `renderer` from pass 0; `balanced` asks for the balanced
     /// schedule, which applies to the internal-lights method with renewed
     /// sets (`resample_every` > 0: it is the first sets' length);
-    /// `build_secs` is what set 0 took to build.
+    /// `build_secs` is what set 0 took to build (counted as a whole set's
+    /// build where its walks stopped early: scaled by the walks it did,
+    /// [`InternalLights::walked`](crate::physics::internal::sources::InternalLights::walked)).
     pub fn new(renderer: &Renderer, balanced: bool, build_secs: f64) -> Self {
         let s = renderer.settings();
         let every = s.internal.expert.resample_every;
         let balanced = (balanced && s.method == Method::Internal && every > 0).then(|| {
             let cam = &renderer.prepared().camera;
             let mut b = BalancedRenewal::new(cam.width as usize * cam.height as usize, every);
-            b.add_set_build(build_secs);
+            let whole = renderer.internal_lights().map_or(1.0, |l| {
+                f64::from(l.params.walks.max(1)) / f64::from(l.walked.max(1))
+            });
+            b.add_set_build(build_secs * whole);
             b
         });
         Self {
@@ -281,13 +302,26 @@ impl Passes {
     /// Renders the next pass (building its light set first if it starts
     /// one); `None` if `cancel` is set meanwhile.
     pub fn next(&mut self, renderer: &Renderer, cancel: &AtomicBool) -> Option<PassImage> {
+        self.next_within(renderer, cancel, None)
+    }
+
+    /// [`Passes::next`] for a render that stops `remaining` seconds from
+    /// now: with a balanced schedule, the set in hand runs on where a fresh
+    /// one would not pay before then
+    /// ([`BalancedRenewal::next_starts_set_within`]).
+    pub fn next_within(
+        &mut self,
+        renderer: &Renderer,
+        cancel: &AtomicBool,
+        remaining: Option<f64>,
+    ) -> Option<PassImage> {
         let Some(schedule) = &mut self.balanced else {
             let img = renderer.pass(self.pass, cancel)?;
             self.set = light_set(renderer.settings(), self.pass);
             self.pass += 1;
             return Some(img);
         };
-        if self.pass > 0 && schedule.next_starts_set() {
+        if self.pass > 0 && schedule.next_starts_set_within(remaining) {
             self.set += 1;
             let t = Instant::now();
             renderer.build_set(self.set, schedule.kernel_neighbours(), cancel)?;

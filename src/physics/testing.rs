@@ -206,6 +206,7 @@ pub(crate) fn sh1_params(
         seed: 0,
         view_share: 0.0,
         view_frame: Default::default(),
+        walk_deadline: None,
     }
 }
 

@@ -462,6 +462,7 @@ pub fn internal_params_for_set(
         seed: settings
             .seed
             .wrapping_add((set as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)),
+        walk_deadline: None,
     }
 }
 

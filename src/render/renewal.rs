@@ -44,6 +44,14 @@ pub const MAX_PERIOD: u32 = 64;
 /// a floor of 0.1 costs at most 10 % where the sets add no noise at all.
 pub const MIN_SET_SHARE: f64 = 0.1;
 
+/// The share of a render's time limit after which its first light set's
+/// walks stop ([`InternalParams::walk_deadline`](crate::physics::internal::sources::InternalParams::walk_deadline)):
+/// a set that would take longer (the thick cumulus's 2.9 s against a
+/// limit of 2 s) is built from fewer walks per light, leaving the rest
+/// of the time for its first passes. The set's noise dominates such
+/// media, so most of the time goes to it.
+pub const FIRST_SET_SHARE: f64 = 0.75;
+
 /// Sets that must be complete before the period is balanced.
 const SETS_BEFORE_BALANCING: u32 = 3;
 
@@ -190,6 +198,13 @@ impl BalancedRenewal {
         self.period
     }
 
+    /// Passes of the current set so far (more than its
+    /// [`period`](BalancedRenewal::period) where it ran on to a time limit,
+    /// [`BalancedRenewal::next_starts_set_within`]).
+    pub fn passes_in_set(&self) -> u32 {
+        self.passes_in_set
+    }
+
     /// Sets complete so far.
     pub fn complete_sets(&self) -> u32 {
         self.sets
@@ -279,6 +294,64 @@ impl BalancedRenewal {
             _ => kernel_neighbours_for_set(self.sets),
         };
         true
+    }
+
+    /// [`BalancedRenewal::next_starts_set`] for a render that stops
+    /// `remaining` seconds from now (`None`: no limit): a set that has its
+    /// passes runs on instead of closing where a fresh one does not pay
+    /// before the limit ([`BalancedRenewal::fresh_set_pays`]). Without it a
+    /// render that stops at a time overshoots by a whole set's build when
+    /// it begins one just before the limit (2.8 s on the thick cumulus).
+    pub fn next_starts_set_within(&mut self, remaining: Option<f64>) -> bool {
+        if self.passes_in_set < self.period {
+            return false;
+        }
+        if remaining.is_some_and(|r| !self.fresh_set_pays(r)) {
+            return false;
+        }
+        self.next_starts_set()
+    }
+
+    /// Whether a fresh set begun now, `remaining` seconds before a render's
+    /// limit, leaves a less noisy image at the limit than the current set
+    /// running on to it, at the mean build and pass times measured so far
+    /// (`d`, `c`). Never where the fresh set's build and one pass do not
+    /// fit; always where its build and a whole period do (the balanced
+    /// schedule's own choice). In between, the image's predicted variance
+    /// `a/n + b Σn_s²/n²` (see [`BalancedRenewal::noise_inflation`]) is
+    /// compared for the two ways of spending the time, from the estimates
+    /// of `a` and `b` when the current set began; without them (before two
+    /// sets are complete) the fresh set begins.
+    pub fn fresh_set_pays(&self, remaining: f64) -> bool {
+        let mean = |total: f64, count: u32| {
+            if count > 0 {
+                total / f64::from(count)
+            } else {
+                0.0
+            }
+        };
+        let d = mean(self.build_secs, self.builds);
+        let c = mean(self.pass_secs, self.timed_passes);
+        if d + c > remaining {
+            return false;
+        }
+        if c <= 0.0 || remaining >= d + f64::from(self.period) * c {
+            return true;
+        }
+        let Some(e) = self.at_set_start else {
+            return true;
+        };
+        let (a, b) = (e.pass_variance.max(0.0), e.set_variance.max(0.0));
+        let (done, current) = (f64::from(self.passes), f64::from(self.passes_in_set));
+        let variance = |n: f64, squares: f64| a / n + b * squares / (n * n);
+        let kept = (remaining / c).floor();
+        let fresh = ((remaining - d) / c).floor().max(1.0);
+        let keeping = variance(done + kept, self.square_lengths + (current + kept).powi(2));
+        let renewing = variance(
+            done + fresh,
+            self.square_lengths + current * current + fresh * fresh,
+        );
+        renewing < keeping
     }
 
     /// Lights the automatic kernel of the current set holds: set 0 and
@@ -470,6 +543,85 @@ mod tests {
             renewal.add_pass(&image, c);
         }
         (renewal, periods)
+    }
+
+    /// A schedule in the middle of a render: three complete sets of ten
+    /// passes and a fourth with its ten, passes of 0.1 s, builds of 1 s,
+    /// and estimates `a` = 1 and `b`.
+    fn mid_render(b: f64) -> BalancedRenewal {
+        let mut r = BalancedRenewal::new(4, 10);
+        r.sets = 3;
+        r.square_lengths = 300.0;
+        r.passes = 40;
+        r.passes_in_set = 10;
+        r.pass_secs = 3.9;
+        r.timed_passes = 39;
+        r.build_secs = 4.0;
+        r.builds = 4;
+        r.at_set_start = Some(RenewalEstimates {
+            pass_variance: 1.0,
+            set_variance: b,
+            pass_secs: 0.1,
+            set_secs: 1.0,
+        });
+        r
+    }
+
+    /// Near a time limit a fresh set begins only if it pays: never where
+    /// its build and a pass do not fit, always where its build and its
+    /// period do, and in between by the predicted variance. With 1.5 s
+    /// left, running on gives 15 more passes of the current set
+    /// (`a/55 + 925 b/55²`), a fresh set 5 passes of its own
+    /// (`a/45 + 425 b/45²`): the fresh set pays where `b/a` > 0.042.
+    #[test]
+    fn a_fresh_set_begins_near_the_limit_only_where_it_pays() {
+        let noisy_sets = mid_render(0.1);
+        let quiet_sets = mid_render(0.01);
+        for r in [&noisy_sets, &quiet_sets] {
+            assert!(!r.fresh_set_pays(1.05), "no build and pass fit in 1.05 s");
+            assert!(r.fresh_set_pays(2.05), "a build and a period fit in 2.05 s");
+        }
+        assert!(noisy_sets.fresh_set_pays(1.5));
+        assert!(!quiet_sets.fresh_set_pays(1.5));
+        let mut limited = mid_render(0.01);
+        assert!(!limited.next_starts_set_within(Some(1.5)));
+        assert_eq!(limited.passes_in_set, 10, "the set runs on");
+        assert!(limited.next_starts_set_within(None));
+        assert_eq!((limited.passes_in_set, limited.sets), (0, 4));
+    }
+
+    /// A render to a limit of 8 s whose sets take 2.8 s to build and whose
+    /// passes 0.07 s (the thick cumulus on two cores) ends within a pass of
+    /// the limit: the set in hand runs on where a fresh one would end
+    /// past it. Asked without the limit, the same schedule begins a third
+    /// set at 5.88 s and ends at 8.75 s.
+    #[test]
+    fn a_timed_render_ends_within_a_pass_of_its_limit() {
+        let (c, d, limit) = (0.07, 2.8, 8.0);
+        let mut rng = Rng::for_sample(5, 0, 0);
+        for bounded in [true, false] {
+            let mut r = BalancedRenewal::new(16, 2);
+            r.add_set_build(d);
+            let mut t = d;
+            let mut passes = 0;
+            while passes == 0 || t < limit {
+                let remaining = bounded.then_some(limit - t);
+                if passes > 0 && r.next_starts_set_within(remaining) {
+                    r.add_set_build(d);
+                    t += d;
+                }
+                let image = pass_image(&[0.0; 16], 1.0, &mut rng);
+                r.add_pass(&image, c);
+                t += c;
+                passes += 1;
+            }
+            if bounded {
+                assert!(t < limit + c + 1e-9, "ended at {t} s");
+                assert!(r.complete_sets() >= 1, "a second set began");
+            } else {
+                assert!(t > limit + 0.7, "ended at {t} s without the limit");
+            }
+        }
     }
 
     /// A first pass that took 100× the others (a driver compiling its

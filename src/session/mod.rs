@@ -189,9 +189,28 @@ impl GpuPasses {
         settings: &RenderSettings,
         builder: LightBuilder<'_>,
     ) -> Result<Renewal, GpuError> {
+        self.next_within(renderer, prepared, settings, builder, None)
+    }
+
+    /// [`GpuPasses::next`] for a render that stops `remaining` seconds
+    /// from now: with a balanced schedule, the set in hand runs on where a
+    /// fresh one would not pay before then
+    /// ([`BalancedRenewal::fresh_set_pays`]).
+    pub fn next_within(
+        &mut self,
+        renderer: &mut GpuRenderer,
+        prepared: &PreparedScene,
+        settings: &RenderSettings,
+        builder: LightBuilder<'_>,
+        remaining: Option<f64>,
+    ) -> Result<Renewal, GpuError> {
         let renewal = match &mut self.balanced {
             None => renew_gpu_lights(renderer, prepared, settings, self.pass, builder)?,
-            Some(b) if self.pass > 0 && b.schedule.set_is_complete() => {
+            Some(b)
+                if self.pass > 0
+                    && b.schedule.set_is_complete()
+                    && remaining.is_none_or(|r| b.schedule.fresh_set_pays(r)) =>
+            {
                 let t = Instant::now();
                 let running = renderer.read_back()?.grey_sums();
                 let sums: Vec<(f64, f64)> = running
