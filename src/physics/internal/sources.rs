@@ -839,6 +839,12 @@ impl InternalLights {
                 .for_each_init(
                     || (vec![Vec3::ZERO; slots], vec![Vec3::ZERO; slots]),
                     |(per_walk, unscattered), (i, (state, light))| {
+                        // A cancelled build stops within a light's walk,
+                        // not a round (the previewer cancels on every
+                        // edit): the round's check below returns.
+                        if cancel.load(Ordering::Relaxed) {
+                            return;
+                        }
                         let x = light.position;
                         if let Some(w) = lattice_point {
                             walk_lattice_point(
@@ -856,6 +862,9 @@ impl InternalLights {
                         }
                     },
                 );
+            if cancel.load(Ordering::Relaxed) {
+                return None;
+            }
             rounds += 1;
             if params.walk_deadline.is_some_and(|d| Instant::now() >= d) {
                 break;
@@ -1533,6 +1542,42 @@ mod tests {
             (b / a - 1.0).abs() < 0.05,
             "terms' energy: full {a}, one round {b}"
         );
+    }
+
+    /// A cancelled build returns nothing: its walks stop at the first
+    /// light that sees the flag, and the round returns.
+    #[test]
+    fn a_cancelled_walk_returns_nothing() {
+        use std::sync::atomic::AtomicBool;
+        let vol = cube(2.0, 0.95, 0.5);
+        let sun = Lights {
+            suns: vec![crate::physics::lights::Sun {
+                direction: Vec3::new(0.3, -0.5, -1.0).normalize(),
+                irradiance: Vec3::ONE,
+            }],
+            points: Vec::new(),
+            environment: None,
+        };
+        let params = InternalParams {
+            lights: 64,
+            walks: 4,
+            ..sh1_params(Clock::OpticalDepth, 0.5, 64, 0.3, L1Form::Field)
+        };
+        let density = placement_density(&vol, params.uniform_mix);
+        let (lights, integral) = place_internal_lights(&vol, &params, &density);
+        let cancelled = AtomicBool::new(true);
+        assert!(InternalLights::build_at(
+            &vol,
+            &sun,
+            &params,
+            lights.clone(),
+            integral,
+            &cancelled
+        )
+        .is_none());
+        let never = AtomicBool::new(false);
+        let built = InternalLights::build_at(&vol, &sun, &params, lights, integral, &never);
+        assert_eq!(built.map(|b| b.walked), Some(4));
     }
 
     /// A light is within the camera's reach when the clock along its own
