@@ -187,5 +187,20 @@ mod tests {
             ron::from_str(meta_value(&meta, "lantern/internal")).unwrap();
         assert_eq!((internal.knobs.lights, internal.expert.walks), (256, 4));
         assert!(meta_value(&meta, "lantern/s_star").parse::<f32>().unwrap() > 0.0);
+        assert!(
+            !meta.iter().any(|(k, _)| k == "lantern/first_set_walks"),
+            "a first set walked whole: {meta:?}"
+        );
+
+        // A limit far shorter than a light set's walks: one round of them,
+        // recorded in the header, and still an image.
+        run(args(&[
+            "--time", "0.0001", "--method", "internal", "--lights", "256", "--walks", "16",
+        ]))
+        .unwrap();
+        let meta = read_exr_metadata(&out).unwrap();
+        assert_eq!(meta_value(&meta, "lantern/first_set_walks"), "1");
+        assert_eq!(meta_value(&meta, "lantern/spp"), "1");
+        assert!(read_exr(&out).unwrap().pixels.iter().any(|v| v.x > 0.0));
     }
 }

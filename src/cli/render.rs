@@ -99,7 +99,9 @@ impl StopRule {
 /// attributes, read back by [`crate::render::export::read_exr_metadata`]):
 /// the spp reached, the seconds spent (the internal lights' build
 /// included), the method, the seed, the backend, the time limit if any,
-/// and for the internal-lights method its settings (RON) and resolved `s*`.
+/// and for the internal-lights method its settings (RON) and resolved `s*`
+/// (`lantern render` adds `lantern/first_set_walks` where a time limit cut
+/// the first light set's walks short of the settings' `K`).
 pub fn render_metadata(
     settings: &RenderSettings,
     spp: u32,
@@ -299,7 +301,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let secs = start.elapsed().as_secs_f64();
     let samples = w as f64 * h as f64 * film.samples as f64;
     let s_star = renderer.internal_lights().map(|l| l.s_star);
-    let meta = render_metadata(
+    let mut meta = render_metadata(
         &settings,
         film.samples,
         spent,
@@ -307,6 +309,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         timed.time,
         s_star,
     );
+    if let Some(l) = renderer
+        .internal_lights()
+        .filter(|l| l.walked < l.params.walks)
+    {
+        meta.push(("lantern/first_set_walks".to_owned(), l.walked.to_string()));
+    }
     write_render(out, &film, exposure, view, &meta, timed.variance.as_deref())?;
     print_time_limit(timed, film.samples, spent);
     let mean = film.image_mean();
