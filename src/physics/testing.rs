@@ -121,20 +121,26 @@ pub(crate) fn chi2_poisson(hist: &[u64], mean: f64) -> (f64, usize) {
     (chi2, bins - 1)
 }
 
+/// One sun whose light travels along `direction` (normalised here) with
+/// `irradiance`, and no other light.
+pub(crate) fn one_sun(direction: Vec3, irradiance: Vec3) -> Lights {
+    Lights {
+        suns: vec![crate::physics::lights::Sun {
+            direction: direction.normalize(),
+            irradiance,
+        }],
+        points: Vec::new(),
+        environment: None,
+    }
+}
+
 /// A bounded, forward-scattering (`g` 0.6), heterogeneous medium lit by
 /// a sun, the optical-depth clock at `s*` 0.5 with 40 terms, and a walk's
 /// start `z` and direction `n` inside it.
 pub(crate) fn forward_scattering_walk() -> (Volume<Field>, Lights, GateSettings, Vec3, Vec3) {
     let mut vol = boxed(1.2, 0.8, 0.95, 1.0, 4);
     vol.optics.g = 0.6;
-    let lights = Lights {
-        suns: vec![crate::physics::lights::Sun {
-            direction: Vec3::new(0.6, -1.0, -0.5).normalize(),
-            irradiance: Vec3::new(3.0, 2.0, 1.0),
-        }],
-        points: Vec::new(),
-        environment: None,
-    };
+    let lights = one_sun(Vec3::new(0.6, -1.0, -0.5), Vec3::new(3.0, 2.0, 1.0));
     let settings = GateSettings {
         s_star: 0.5,
         n_terms: 40,

@@ -323,15 +323,7 @@ impl BalancedRenewal {
     /// of `a` and `b` when the current set began; without them (before two
     /// sets are complete) the fresh set begins.
     pub fn fresh_set_pays(&self, remaining: f64) -> bool {
-        let mean = |total: f64, count: u32| {
-            if count > 0 {
-                total / f64::from(count)
-            } else {
-                0.0
-            }
-        };
-        let d = mean(self.build_secs, self.builds);
-        let c = mean(self.pass_secs, self.timed_passes);
+        let (c, d) = self.mean_secs();
         if d + c > remaining {
             return false;
         }
@@ -485,12 +477,29 @@ impl BalancedRenewal {
             .map(|(&s, &q)| (q - s * s / k).max(0.0))
             .sum::<f64>()
             / (self.sum.len() as f64 * (k - 1.0));
+        let (pass_secs, set_secs) = self.mean_secs();
         Some(RenewalEstimates {
             pass_variance: a,
             set_variance: spread - a * self.inverse_lengths / k,
-            pass_secs: self.pass_secs / f64::from(self.timed_passes),
-            set_secs: self.build_secs / f64::from(self.builds),
+            pass_secs,
+            set_secs,
         })
+    }
+
+    /// The mean seconds of a timed pass and of a set's build (0 before
+    /// any).
+    fn mean_secs(&self) -> (f64, f64) {
+        let mean = |total: f64, count: u32| {
+            if count > 0 {
+                total / f64::from(count)
+            } else {
+                0.0
+            }
+        };
+        (
+            mean(self.pass_secs, self.timed_passes),
+            mean(self.build_secs, self.builds),
+        )
     }
 }
 

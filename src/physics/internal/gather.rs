@@ -814,14 +814,7 @@ mod tests {
         let g = 0.3f32;
         let vol = cube(sigma, albedo, g);
         let e_sun = Vec3::new(2.0, 1.0, 0.5);
-        let lights = Lights {
-            suns: vec![crate::physics::lights::Sun {
-                direction: -Vec3::Y,
-                irradiance: e_sun,
-            }],
-            points: Vec::new(),
-            environment: None,
-        };
+        let lights = one_sun(-Vec3::Y, e_sun);
         let (y0, z0) = (0.2f32, -0.1f32);
         let eye = Vec3::new(-3.0, y0, z0);
         let s1 = (albedo * sigma) as f64

@@ -333,14 +333,7 @@ mod tests {
     fn second_flights_go_where_the_light_reaches() {
         let mut vol = boxed(30.0, 0.0, 0.99, 1.0, 8);
         vol.optics.g = 0.85;
-        let lights = Lights {
-            suns: vec![crate::physics::lights::Sun {
-                direction: Vec3::new(0.0, -1.0, 0.0),
-                irradiance: Vec3::ONE,
-            }],
-            points: Vec::new(),
-            environment: None,
-        };
+        let lights = one_sun(Vec3::new(0.0, -1.0, 0.0), Vec3::ONE);
         let (dir, own) = (Vec3::new(0.6, 0.0, 0.8), Vec3::new(0.0, 0.6, 0.8));
         let deep = second_flight(&vol, &lights, Vec3::ZERO, dir, own, 0.5, 0.3, 0.7);
         assert_eq!(deep, None);

@@ -796,18 +796,21 @@ impl InternalLights {
                 // unbiased, but the set covers the sphere evenly).
                 let rotation = random_rotation(&mut rng);
                 let phi0 = 2.0 * std::f32::consts::PI * rng.next_f32();
+                // Only the lights within the camera's reach walk towards
+                // the eye.
+                let to_eye = (params.view_walks > 0 && reached[i])
+                    .then(|| (params.eye - x).try_normalize().unwrap_or(Vec3::Z));
                 Walked {
                     rng,
                     rotation,
                     phi0,
+                    to_eye,
                     view: Vec3::ZERO,
                     f: vec![Vec3::ZERO; count],
                     multi: vec![Vec3::ZERO; count],
                     scattered: vec![Vec3::ZERO; count],
                     arrival,
                     energy,
-                    order,
-                    walks,
                 }
             })
             .collect();
@@ -819,7 +822,7 @@ impl InternalLights {
         // directions per light, weighted `4π/r`, and `r` walks towards
         // the eye.
         let lattice: Vec<u32> = lattice_order(walks).collect();
-        let view_walks = if params.view_walks > 0 && reached.iter().any(|&r| r) {
+        let view_walks = if walked.iter().any(|w| w.to_eye.is_some()) {
             params.view_walks
         } else {
             0
@@ -832,36 +835,32 @@ impl InternalLights {
             }
             let lattice_point = lattice.get(rounds as usize).copied();
             let towards_eye = rounds < view_walks;
-            walked
-                .par_iter_mut()
-                .zip(&lights)
-                .enumerate()
-                .for_each_init(
-                    || (vec![Vec3::ZERO; slots], vec![Vec3::ZERO; slots]),
-                    |(per_walk, unscattered), (i, (state, light))| {
-                        // A cancelled build stops within a light's walk,
-                        // not a round (the previewer cancels on every
-                        // edit): the round's check below returns.
-                        if cancel.load(Ordering::Relaxed) {
-                            return;
-                        }
-                        let x = light.position;
-                        if let Some(w) = lattice_point {
-                            walk_lattice_point(
-                                &walker,
-                                (x, light.weight),
-                                w,
-                                state,
-                                per_walk,
-                                unscattered,
-                            );
-                        }
-                        if towards_eye && reached[i] {
-                            let n = (params.eye - x).try_normalize().unwrap_or(Vec3::Z);
-                            state.view += walker.accumulate_collided(x, n, &mut state.rng);
-                        }
-                    },
-                );
+            walked.par_iter_mut().zip(&lights).for_each_init(
+                || (vec![Vec3::ZERO; slots], vec![Vec3::ZERO; slots]),
+                |(per_walk, unscattered), (state, light)| {
+                    // A cancelled build stops within a light's walk,
+                    // not a round (the previewer cancels on every
+                    // edit): the round's check below returns.
+                    if cancel.load(Ordering::Relaxed) {
+                        return;
+                    }
+                    let x = light.position;
+                    if let Some(w) = lattice_point {
+                        let n = lattice_direction(w, walks, state.rotation, state.phi0);
+                        walk_direction(
+                            &walker,
+                            (x, n, light.weight),
+                            order,
+                            state,
+                            per_walk,
+                            unscattered,
+                        );
+                    }
+                    if let Some(n) = state.to_eye.filter(|_| towards_eye) {
+                        state.view += walker.accumulate_collided(x, n, &mut state.rng);
+                    }
+                },
+            );
             if cancel.load(Ordering::Relaxed) {
                 return None;
             }
@@ -870,30 +869,23 @@ impl InternalLights {
                 break;
             }
         }
-        // The sums of a build cut short scaled to its walks; the walks
-        // towards the eye per unit chance of a collision (they share `x`
-        // and `n`, so the chance divides their sum once).
+        // Each of the `r` walks done weighs `4π/r` (the sums hold them
+        // unweighted); the walks towards the eye are taken per unit chance
+        // of a collision (they share `x` and `n`, so the chance divides
+        // their sum once).
         let lattice_done = rounds.min(walks);
         let view_done = rounds.min(view_walks);
-        let scale = walks as f32 / lattice_done as f32;
+        let w_dir = 4.0 * std::f32::consts::PI / lattice_done as f32;
         walked
             .par_iter_mut()
             .zip(&lights)
             .for_each(|(state, light)| {
-                if lattice_done < walks {
-                    for v in state
-                        .f
-                        .iter_mut()
-                        .chain(&mut state.multi)
-                        .chain(&mut state.scattered)
-                    {
-                        *v *= scale;
-                    }
-                    state.energy.iter_mut().skip(1).for_each(|e| *e *= scale);
-                }
-                if state.view != Vec3::ZERO {
+                let sums = state.f.iter_mut().chain(&mut state.multi);
+                let sums = sums.chain(&mut state.scattered);
+                sums.chain(state.energy.iter_mut().skip(1))
+                    .for_each(|v| *v *= w_dir);
+                if let Some(n) = state.to_eye.filter(|_| state.view != Vec3::ZERO) {
                     let x = light.position;
-                    let n = (params.eye - x).try_normalize().unwrap_or(Vec3::Z);
                     state.view /=
                         view_done as f32 * collision_probability(vol, params.s_star, x, -n);
                 }
@@ -1228,37 +1220,43 @@ struct Walked {
     /// The lattice's random rotation and azimuth offset.
     rotation: glam::Quat,
     phi0: f32,
+    /// The direction towards the eye, for a light within the camera's
+    /// reach ([`within_view_reach`]), which walks that way.
+    to_eye: Option<Vec3>,
     /// The walks towards the eye: their collided part, summed.
     view: Vec3,
+    /// `F`, `Σ J_k` and its collided part by direction (spherical
+    /// harmonics) and the terms' energies `k ≥ 1`: sums over the walks,
+    /// unweighted until the walks are done. `energy[0]` is the `k = 0`
+    /// term, exact.
     f: Vec<Vec3>,
     multi: Vec<Vec3>,
     scattered: Vec<Vec3>,
     arrival: Vec<Vec3>,
     energy: Vec<Vec3>,
-    /// Spherical-harmonics order and coefficients per light.
-    order: u32,
-    /// Lattice points per light (`K`).
-    walks: u32,
 }
 
-/// Walks point `w` of the light's lattice of `state.walks` directions
-/// from `x` (its volume weight `weight`) and adds the walk, weighted
-/// `4π/K`, to its sums: `F` (term 1), `Σ J_k` and its collided part by
-/// direction, and the terms' energies (`per_walk` and `unscattered` are
-/// scratch, one slot per term).
-fn walk_lattice_point<D: DensityField>(
+/// Point `w` of a spherical Fibonacci lattice of `walks` directions under
+/// `rotation`, its azimuths offset by `phi0`.
+fn lattice_direction(w: u32, walks: u32, rotation: glam::Quat, phi0: f32) -> Vec3 {
+    let z = 1.0 - (2 * w + 1) as f32 / walks as f32;
+    let phi = phi0 + w as f32 * GOLDEN_ANGLE;
+    let s = (1.0 - z * z).max(0.0).sqrt();
+    rotation * Vec3::new(s * phi.cos(), s * phi.sin(), z)
+}
+
+/// Walks from `x` (its volume weight `weight`) in direction `n` and adds
+/// the walk to the light's sums, unweighted: `F` (term 1), `Σ J_k` and its
+/// collided part projected on the harmonics of `order`, and the terms'
+/// energies (`per_walk` and `unscattered` are scratch, one slot per term).
+fn walk_direction<D: DensityField>(
     walker: &Walks<'_, D>,
-    (x, weight): (Vec3, f32),
-    w: u32,
+    (x, n, weight): (Vec3, Vec3, f32),
+    order: u32,
     state: &mut Walked,
     per_walk: &mut [Vec3],
     unscattered: &mut [Vec3],
 ) {
-    let walks = state.walks;
-    let z = 1.0 - (2 * w + 1) as f32 / walks as f32;
-    let phi = state.phi0 + w as f32 * GOLDEN_ANGLE;
-    let sz = (1.0 - z * z).max(0.0).sqrt();
-    let n = state.rotation * Vec3::new(sz * phi.cos(), sz * phi.sin(), z);
     per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
     unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
     walker.accumulate_j_from(x, n, 1, &mut state.rng, per_walk, Some(unscattered));
@@ -1269,21 +1267,20 @@ fn walk_lattice_point<D: DensityField>(
     let s_star = walker.gates.s_star;
     let after_collision = collided_per_unit_chance(walker.vol, s_star, x, n, per_walk, unscattered);
     let first = per_walk.get(1).copied().unwrap_or(Vec3::ZERO);
-    let w_dir = 4.0 * std::f32::consts::PI / walks as f32;
     let mut y = [0.0f32; MAX_COUNT];
-    sh_basis(state.order, n, &mut y);
+    sh_basis(order, n, &mut y);
     let sums = state
         .multi
         .iter_mut()
         .zip(&mut state.scattered)
         .zip(&mut state.f);
     for (((multi, scattered), f), &yc) in sums.zip(&y) {
-        *multi += total * (yc * w_dir);
-        *scattered += after_collision * (yc * w_dir);
-        *f += first * (yc * w_dir);
+        *multi += total * yc;
+        *scattered += after_collision * yc;
+        *f += first * yc;
     }
     for (e, v) in state.energy.iter_mut().zip(per_walk.iter()).skip(1) {
-        *e += *v * (weight * w_dir);
+        *e += *v * weight;
     }
 }
 
@@ -1337,18 +1334,10 @@ mod tests {
     /// `reconstruct_view` is the kernel average of those values.
     #[test]
     fn view_walks_match_the_harmonics_towards_the_eye() {
-        use crate::physics::lights::Sun;
         use crate::physics::sh::sh_basis;
         use std::sync::atomic::AtomicBool;
         let vol = cube(1.5, 0.9, 0.0);
-        let sun = Lights {
-            suns: vec![Sun {
-                direction: Vec3::new(0.3, -0.2, -1.0).normalize(),
-                irradiance: Vec3::new(1.0, 2.0, 3.0),
-            }],
-            points: Vec::new(),
-            environment: None,
-        };
+        let sun = one_sun(Vec3::new(0.3, -0.2, -1.0), Vec3::new(1.0, 2.0, 3.0));
         let eye = Vec3::new(0.4, 0.3, 4.0);
         let params = InternalParams {
             lights: 1024,
@@ -1459,17 +1448,9 @@ mod tests {
     /// (1/16 of the full build's) would fail every one.
     #[test]
     fn a_build_stopped_at_its_deadline_keeps_the_mean() {
-        use crate::physics::lights::Sun;
         use std::sync::atomic::AtomicBool;
         let vol = cube(2.0, 0.95, 0.5);
-        let sun = Lights {
-            suns: vec![Sun {
-                direction: Vec3::new(0.3, -0.5, -1.0).normalize(),
-                irradiance: Vec3::ONE,
-            }],
-            points: Vec::new(),
-            environment: None,
-        };
+        let sun = one_sun(Vec3::new(0.3, -0.5, -1.0), Vec3::ONE);
         let base = InternalParams {
             lights: 2048,
             walks: 16,
@@ -1550,14 +1531,7 @@ mod tests {
     fn a_cancelled_walk_returns_nothing() {
         use std::sync::atomic::AtomicBool;
         let vol = cube(2.0, 0.95, 0.5);
-        let sun = Lights {
-            suns: vec![crate::physics::lights::Sun {
-                direction: Vec3::new(0.3, -0.5, -1.0).normalize(),
-                irradiance: Vec3::ONE,
-            }],
-            points: Vec::new(),
-            environment: None,
-        };
+        let sun = one_sun(Vec3::new(0.3, -0.5, -1.0), Vec3::ONE);
         let params = InternalParams {
             lights: 64,
             walks: 4,

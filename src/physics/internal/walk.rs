@@ -806,18 +806,10 @@ mod tests {
     /// shows).
     #[test]
     fn the_default_series_keeps_a_thick_clouds_long_paths() {
-        use crate::physics::lights::Sun;
         use crate::scene::settings::{Quality, DEFAULT_S_STAR, MAX_TERMS};
         let mut vol = boxed(1.0, 0.0, 0.999, 20.0, 4);
         vol.optics.g = 0.0;
-        let lights = Lights {
-            suns: vec![Sun {
-                direction: Vec3::NEG_Y,
-                irradiance: Vec3::ONE,
-            }],
-            points: Vec::new(),
-            environment: None,
-        };
+        let lights = one_sun(Vec3::NEG_Y, Vec3::ONE);
         let default_terms = Quality::Final.settings().knobs.terms;
         let settings = GateSettings {
             s_star: DEFAULT_S_STAR,
