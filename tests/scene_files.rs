@@ -7,26 +7,37 @@ use std::path::Path;
 
 use lantern::scene::Scene;
 
+/// The `.ron` files under `dir` and its folders (the suite's and the
+/// studies' scenes beside the examples).
+fn scene_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            scene_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "ron") {
+            out.push(path);
+        }
+    }
+}
+
 #[test]
 fn every_example_scene_round_trips_and_loads() {
-    let dir = common::root().join("assets/scenes");
-    let mut count = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.extension().is_none_or(|e| e != "ron") {
-            continue;
-        }
-        let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let mut paths = Vec::new();
+    scene_files(&common::root().join("assets/scenes"), &mut paths);
+    for path in &paths {
+        let scene = Scene::load(path).unwrap_or_else(|e| panic!("{e}"));
         let text = scene.to_ron().unwrap();
-        let again = Scene::from_ron(&text, &path).unwrap_or_else(|e| panic!("{e}\n{text}"));
+        let again = Scene::from_ron(&text, path).unwrap_or_else(|e| panic!("{e}\n{text}"));
         assert_eq!(scene, again, "{}", path.display());
-        // The density loads (grids read, clouds baked).
-        let density = scene.load_density(&dir).unwrap_or_else(|e| panic!("{e}"));
+        // The density loads (grids read, clouds baked), relative to the
+        // scene's own folder.
+        let dir = path.parent().unwrap();
+        let density = scene.load_density(dir).unwrap_or_else(|e| panic!("{e}"));
         let (lo, hi) = density.bounds();
-        assert!(hi.cmpgt(lo).all());
-        count += 1;
+        assert!(hi.cmpgt(lo).all(), "{}", path.display());
     }
-    assert!(count >= 4, "only {count} example scenes");
+    // 6 examples, 7 suite scenes, 14 studies.
+    assert!(paths.len() >= 27, "only {} scene files", paths.len());
 }
 
 /// A valid scene with one line replaced.
