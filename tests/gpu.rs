@@ -267,7 +267,11 @@ fn mirrors_match_wgsl_layout() {
             has_view,
             sky_offset,
             has_sky,
-            _pad0
+            phase_view_offset,
+            has_phase_view,
+            _pad0,
+            _pad1,
+            _pad2
         ]
     );
 }
@@ -589,6 +593,28 @@ fn gather_agrees_puffs_view_walks() {
         return;
     };
     assert!(cache.has_view());
+}
+
+/// Phase walks (`phase_walks`, `g` 0.85): the GPU's `L₁` reads the
+/// lights' phase-walk values along the camera ray as the CPU's does.
+#[test]
+fn gather_agrees_puffs_phase_walks() {
+    let scene = "assets/scenes/puffs_grid.ron";
+    let prepared = Arc::new(common::prepare_with(scene, |s| {
+        s.camera.width = 24;
+        s.camera.height = 24;
+        s.medium.g = 0.85;
+    }));
+    let Some((_, _, cache)) = agree_gather_prepared(scene, prepared, 24, 256, |s| {
+        s.knobs.s_star = Some(0.5);
+        s.knobs.terms = 40;
+        s.knobs.lights = 2048;
+        s.expert.walks = 16;
+        s.expert.view_walks = 16;
+    }) else {
+        return;
+    };
+    assert!(cache.has_view() && cache.has_phase_view());
 }
 
 /// The GPU leaves the kernel reconstruction unclamped as the CPU does.
@@ -1266,16 +1292,41 @@ fn gather_with_gpu_built_view_walks_agrees_thin_sphere() {
     gpu_lit_case(|p| p.view_walks = 16);
 }
 
+/// [`gather_with_gpu_built_view_walks_agrees_thin_sphere`] in a medium of
+/// `g` 0.85, where the lights also run phase walks (`phase_walks`) and
+/// `L₁`'s first scattering reads their values: the GPU's phase walks
+/// estimate what the CPU's do.
+#[test]
+fn gather_with_gpu_built_phase_walks_agrees_thin_sphere() {
+    use lantern::physics::internal::sources::PHASE_WALKS_MIN_G;
+    let g = 0.85;
+    assert!(g >= PHASE_WALKS_MIN_G);
+    gpu_lit_case_with(|s| s.medium.g = g, |p| p.view_walks = 16);
+}
+
 /// The case of [`gather_with_gpu_built_lights_agrees_thin_sphere`], the
 /// parameters changed by `edit`.
 fn gpu_lit_case(edit: impl Fn(&mut InternalParams)) {
+    gpu_lit_case_with(|_| {}, edit);
+}
+
+/// [`gpu_lit_case`] with the scene changed by `scene_edit`.
+fn gpu_lit_case_with(
+    scene_edit: impl Fn(&mut lantern::scene::Scene),
+    edit: impl Fn(&mut InternalParams),
+) {
     let Some(ctx) = common::gpu() else { return };
     let scene = "assets/scenes/thin_sphere.ron";
     let side = 16;
-    let prepared = prepare_small(scene, side);
+    let prepared = Arc::new(common::prepare_with(scene, |s| {
+        s.camera.width = side;
+        s.camera.height = side;
+        scene_edit(s);
+    }));
     let wrong = Arc::new(common::prepare_with(scene, |s| {
         s.camera.width = side;
         s.camera.height = side;
+        scene_edit(s);
         s.medium.albedo *= 0.9;
     }));
     let spp = 64;
@@ -1310,6 +1361,10 @@ fn gpu_lit_case(edit: impl Fn(&mut InternalParams)) {
     let gpu_cache =
         build_internal_lights_gpu(&ctx, &prepared, &params).unwrap_or_else(|e| panic!("{e:#}"));
     assert_eq!(gpu_cache.has_view(), params.view_walks > 0);
+    assert_eq!(
+        gpu_cache.has_phase_view(),
+        lantern::physics::internal::sources::phase_walks(&params, prepared.volume.optics.g) > 0
+    );
     let gpu_secs = t.elapsed().as_secs_f64();
     let z = (gather_mean(&prepared, gpu_cache, spp, 300) - mean) / sigma;
     // The same parameters (s* is the scene's default) with the albedo 10 %
@@ -1378,7 +1433,11 @@ fn walk_mirrors_match_wgsl_layout() {
             walk_offset,
             record_stride,
             eye,
-            view_walks
+            view_walks,
+            phase_walks,
+            _pad0,
+            _pad1,
+            _pad2
         ]
     );
 }

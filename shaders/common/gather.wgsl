@@ -412,6 +412,49 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     return out;
 }
 
+// `L₁`'s first scattering at `y` of the multiply scattered source read
+// from the lights' phase walks along the camera ray (`phase_view_l1` in
+// gather.rs): `b(y) ∫ dr T(y, x') J̃(x')`, `x' = y − r n`, one sample of
+// `r` as `field_l1_at` draws it.
+fn phase_view_l1(
+    n: vec3<f32>,
+    budget: f32,
+    y: vec3<f32>,
+    rho_y: f32,
+    rng: ptr<function, Rng>,
+) -> vec3<f32> {
+    let back = -n;
+    let bc = medium_clip(y, back);
+    if !bc.hit {
+        return vec3<f32>(0.0);
+    }
+    let exit = bc.t1;
+    var r = 0.0;
+    var inv_pdf = 0.0;
+    if gather_params.clock == CLOCK_GEOMETRIC {
+        let r_max = min(budget, exit);
+        r = rng_next_f32(rng) * r_max;
+        inv_pdf = r_max;
+    } else {
+        let c = rng_next_f32(rng) * budget;
+        let m = march_clock(gather_params.clock, gather_params.s_star, y, back, 0.0, exit, exit, c);
+        if !m.reached || m.rate <= 0.0 {
+            return vec3<f32>(0.0);
+        }
+        r = m.value;
+        inv_pdf = budget / m.rate;
+    }
+    if inv_pdf <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let xp = y + back * r;
+    let j = reconstruct_phase_view(xp, density(xp));
+    if all(j == vec3<f32>(0.0)) {
+        return vec3<f32>(0.0);
+    }
+    return gather_params.scatter * rho_y * transmittance_by(y, back, r, GATHER_TRANSMITTANCE, rng) * inv_pdf * j;
+}
+
 // `L₁`'s integrand at the camera-ray point `y = x + t dir` (without
 // `T(x, y)`; `budget_in`: `s*` less the clock from `x` to `y`), one
 // sample: `b(y) ∫ dn' P(n·n') ∫ dr T(y, x') J(x', n')` over the window,
@@ -451,6 +494,13 @@ fn field_l1_at(
                 throughput /= keep;
             }
         }
+        // With phase walks the first scattering's multiply scattered
+        // source is theirs, read along the camera ray; the direction drawn
+        // below then serves `S₁` and the further scatterings only.
+        let phase_view = scattering == 1u && gather_params.has_phase_view == 1u;
+        if phase_view {
+            sum += phase_view_l1(towards, budget, point, rho_point, rng);
+        }
         let u1 = rng_next_f32(rng);
         let u2 = rng_next_f32(rng);
         let travel = sample_hg(gather_params.g, towards, u1, u2);
@@ -487,7 +537,10 @@ fn field_l1_at(
         }
         let xp = point + back * r;
         let rho = density(xp);
-        var jv = reconstruct_multi(xp, travel, rho, gather_params.multi_offset);
+        var jv = vec3<f32>(0.0);
+        if !phase_view {
+            jv = reconstruct_multi(xp, travel, rho, gather_params.multi_offset);
+        }
         if rho > 0.0 {
             jv += gather_params.scatter * rho * single_scatter_source_with(xp, travel, GATHER_TRANSMITTANCE, rng);
         }

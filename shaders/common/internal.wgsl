@@ -127,14 +127,15 @@ fn reconstruct_multi(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32)
 }
 
 // The normalised kernel average at `p` of each light's series at `offset`
-// evaluated towards `n`, or (`from_view`) of its view-walk estimate.
-fn kernel_average(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32, from_view: bool) -> vec3<f32> {
+// evaluated towards `n`, or (`per_light`) of its one value at `offset`
+// (the view or phase walks' estimate).
+fn kernel_average(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32, per_light: bool) -> vec3<f32> {
     let scale_p = reconstruction_scale(density_at_p);
     if scale_p <= 0.0 {
         return vec3<f32>(0.0);
     }
     var y: array<f32, 25>;
-    if !from_view {
+    if !per_light {
         y = sh_basis(gather_params.sh_order, n);
     }
     let h = gather_params.kernel_radius;
@@ -157,8 +158,8 @@ fn kernel_average(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32, fr
                 if q < 1.0 {
                     let w = (1.0 - q) * (1.0 - q);
                     var value: vec3<f32>;
-                    if from_view {
-                        value = internal_vec4[gather_params.view_offset + i].xyz;
+                    if per_light {
+                        value = internal_vec4[offset + i].xyz;
                     } else {
                         value = eval_sh(offset, i, &y);
                     }
@@ -180,5 +181,12 @@ fn kernel_average(p: vec3<f32>, n: vec3<f32>, density_at_p: f32, offset: u32, fr
 // the lights' view-walk estimates (`InternalLights::reconstruct_view`), in
 // place of `reconstruct_multi(p, n, density_at_p, scattered_offset)`.
 fn reconstruct_view(p: vec3<f32>, density_at_p: f32) -> vec3<f32> {
-    return kernel_average(p, vec3<f32>(0.0, 0.0, 1.0), density_at_p, 0u, true);
+    return kernel_average(p, vec3<f32>(0.0, 0.0, 1.0), density_at_p, gather_params.view_offset, true);
+}
+
+// The source one more scattering sends towards the eye at `p`: the kernel
+// average of the lights' phase-walk means
+// (`InternalLights::reconstruct_phase_view`).
+fn reconstruct_phase_view(p: vec3<f32>, density_at_p: f32) -> vec3<f32> {
+    return kernel_average(p, vec3<f32>(0.0, 0.0, 1.0), density_at_p, gather_params.phase_view_offset, true);
 }

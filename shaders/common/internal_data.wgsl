@@ -62,7 +62,13 @@ struct GatherParams {
     // (`InternalLights::sky`).
     sky_offset: u32,
     has_sky: u32,
+    // Vec4 table offset of the phase walks' means, one per light, read
+    // when `has_phase_view` is 1 (`InternalLights::reconstruct_phase_view`).
+    phase_view_offset: u32,
+    has_phase_view: u32,
     _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // The clock tags `CLOCK_*` and the forms of the gather's L₁, `L1_*`, come

@@ -23,7 +23,11 @@
 // view walks one more: their mean collided part per unit chance towards
 // the eye (walks `K .. K + view_walks` of the light, all along
 // `normalize(eye − x)`; "Walks towards the eye" in
-// src/physics/internal/sources.rs). The first vec4's `w` counts the walks
+// src/physics/internal/sources.rs), then with phase walks one more: their
+// mean of all of `Σ_{k≥1} J_k` (walks `K + view_walks .. + phase_walks`,
+// each along the direction towards the eye turned by one draw of the
+// phase function; `phase_walks` in src/physics/internal/sources.rs).
+// The first vec4's `w` counts the walks
 // of the light that the driver's loop cap cut short (`loops_cut_short`:
 // their terms are too small). Keep
 // `WalkParams` in sync with `GpuWalkParams` in src/gpu/mirrors.rs.
@@ -60,6 +64,11 @@ struct WalkParams {
     // The camera's eye and the walks per light towards it.
     eye: vec3<f32>,
     view_walks: u32,
+    // Phase walks per light, after the view walks.
+    phase_walks: u32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 @group(0) @binding(5) var<uniform> walk_params: WalkParams;
@@ -133,16 +142,22 @@ fn walk_lights(
     // A spread walk (SH, F, energies) or a walk towards the eye.
     let spread = w < wp.walks;
     let towards_eye = !spread && w < wp.walks + wp.view_walks;
-    if spread || towards_eye {
+    let phase_turned = !spread && !towards_eye && w < wp.walks + wp.view_walks + wp.phase_walks;
+    let walked = spread || towards_eye || phase_turned;
+    if walked {
+        var walk_rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_STREAM + 1u + w);
         if spread {
             let z = 1.0 - f32(2u * w + 1u) / f32(wp.walks);
             let phi = phi0 + f32(w) * GOLDEN_ANGLE;
             let s = sqrt(max(1.0 - z * z, 0.0));
             n = quat_rotate(rotation, vec3<f32>(s * cos(phi), s * sin(phi), z));
-        } else {
+        } else if towards_eye {
             n = eye_direction(x);
+        } else {
+            let u1 = rng_next_f32(&walk_rng);
+            let u2 = rng_next_f32(&walk_rng);
+            n = sample_hg(scene.medium.g, eye_direction(x), u1, u2);
         }
-        var walk_rng = rng_for_sample(pass_params.seed_lo, pass_params.seed_hi, i, WALK_STREAM + 1u + w);
         let settings = GateSettings(wp.s_star, wp.n_terms, wp.clock, wp.rr_start);
         // The walks towards the eye keep only the collided part.
         walk_collided_only = towards_eye;
@@ -150,7 +165,7 @@ fn walk_lights(
     }
     // Asked once the walk is done (accumulate.wgsl): whether the driver
     // ended its loops, counted in the record's first `w`.
-    let cut = (spread || towards_eye) && loops_cut_short(wp.light_count);
+    let cut = walked && loops_cut_short(wp.light_count);
     var total = vec3<f32>(0.0);
     for (var k = 1u; k <= terms; k++) {
         total += per_walk[k];
@@ -175,9 +190,15 @@ fn walk_lights(
 
     // Only spread walks feed the harmonics and the energies, only walks
     // towards the eye the view estimate.
+    // Phase walks only their value: all of `Σ_{k≥1} J_k`.
     var view = vec3<f32>(0.0);
-    if towards_eye {
-        view = after_collision / f32(wp.view_walks);
+    var phase = vec3<f32>(0.0);
+    if towards_eye || phase_turned {
+        if towards_eye {
+            view = after_collision / f32(wp.view_walks);
+        } else {
+            phase = total / f32(wp.phase_walks);
+        }
         total = vec3<f32>(0.0);
         after_collision = vec3<f32>(0.0);
         first = vec3<f32>(0.0);
@@ -188,7 +209,8 @@ fn walk_lights(
     // collided part's, the energies of k = 1..=N (k = 0 comes from the
     // arrival below), then the view estimate if there are view walks.
     let spread_quantities = 3u * count + terms;
-    let quantities = spread_quantities + min(wp.view_walks, 1u);
+    let view_quantities = spread_quantities + min(wp.view_walks, 1u);
+    let quantities = view_quantities + min(wp.phase_walks, 1u);
     for (var base = 0u; base < quantities; base += ROUND) {
         for (var j = 0u; j < ROUND; j++) {
             let q = base + j;
@@ -201,8 +223,10 @@ fn walk_lights(
                 v = after_collision * (y[q - 2u * count] * w_dir);
             } else if q < spread_quantities {
                 v = per_walk[q - 3u * count + 1u] * (volume * w_dir);
-            } else if q < quantities {
+            } else if q < view_quantities {
                 v = view;
+            } else if q < quantities {
+                v = phase;
             }
             partial[lane * ROUND + j] = vec4<f32>(v, select(0.0, 1.0, cut && q == 0u));
         }
@@ -216,8 +240,10 @@ fn walk_lights(
                 cut_walks += partial[l * ROUND + lane].w;
             }
             var slot = record + q;
-            if q >= spread_quantities {
+            if q >= view_quantities {
                 slot = record + wp.record_stride - 1u;
+            } else if q >= spread_quantities {
+                slot = record + wp.record_stride - 1u - min(wp.phase_walks, 1u);
                 if any(sum != vec3<f32>(0.0)) {
                     sum /= collision_probability(wp.s_star, x, -eye_direction(x));
                 }

@@ -52,6 +52,9 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
     let view_offset = vec4.len() as u32;
     let has_view = cache.has_view();
     vec4.extend(cache.view.iter().map(|v| [v.x, v.y, v.z, 0.0]));
+    let phase_view_offset = vec4.len() as u32;
+    let has_phase_view = cache.has_phase_view();
+    vec4.extend(cache.phase_view.iter().map(|v| [v.x, v.y, v.z, 0.0]));
     let sky_offset = vec4.len() as u32;
     let has_sky = !cache.sky.is_empty();
     vec4.extend(cache.sky.iter().map(|c| [c.x, c.y, c.z, 0.0]));
@@ -116,7 +119,11 @@ pub fn pack_lights(cache: &InternalLights, light_samples: u32) -> PackedLights {
         has_view: u32::from(has_view),
         sky_offset,
         has_sky: u32::from(has_sky),
+        phase_view_offset,
+        has_phase_view: u32::from(has_phase_view),
         _pad0: 0,
+        _pad1: 0,
+        _pad2: 0,
     };
     PackedLights {
         params,

@@ -270,10 +270,20 @@ pub struct GpuGatherParams {
     /// 1: the lights' `S₁` holds the sky's share (evaluated from the
     /// coefficients at `sky_offset`); 0: no sky.
     pub has_sky: u32,
+    /// Vec4 table offset: per light the phase walks' mean
+    /// (`InternalLights::reconstruct_phase_view`), if `has_phase_view`.
+    pub phase_view_offset: u32,
+    /// 1: `L₁`'s first scattering reads the phase walks' values along the
+    /// camera ray; 0: the harmonics in the direction it draws.
+    pub has_phase_view: u32,
     /// Padding to a multiple of 16 bytes.
     pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Padding.
+    pub _pad2: u32,
 }
-const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 208);
+const _: () = assert!(std::mem::size_of::<GpuGatherParams>() == 224);
 
 /// The placement grid and mixture of the internal lights
 /// (`PlacementDensity`). Keep in sync with `PlacementParams` in
@@ -342,8 +352,17 @@ pub struct GpuWalkParams {
     /// Walks per light towards the eye (`InternalParams::view_walks`),
     /// after the `walks` spread ones.
     pub view_walks: u32,
+    /// Phase walks per light (`sources::phase_walks`), after the view
+    /// walks.
+    pub phase_walks: u32,
+    /// Padding to a multiple of 16 bytes.
+    pub _pad0: u32,
+    /// Padding.
+    pub _pad1: u32,
+    /// Padding.
+    pub _pad2: u32,
 }
-const _: () = assert!(std::mem::size_of::<GpuWalkParams>() == 64);
+const _: () = assert!(std::mem::size_of::<GpuWalkParams>() == 80);
 
 /// One pixel's running statistics on the GPU: Welford mean and sum of
 /// squared deviations of the estimate, and the mean of its single-scattering

@@ -21,7 +21,10 @@
 //!
 //!   With view walks (`InternalParams::view_walks`) each light's walks
 //!   `K .. K + view_walks` all go towards the eye and add one more value
-//!   per light ("Walks towards the eye" in `physics::internal`).
+//!   per light ("Walks towards the eye" in `physics::internal`); in a
+//!   medium of `|g|` ≥ `PHASE_WALKS_MIN_G` the next [`phase_walks`] start
+//!   towards the eye turned by the phase function and add one more
+//!   (`L₁`'s source, [`InternalLights::reconstruct_phase_view`]).
 //!
 //! Positions, weights, SH coefficients, arriving light and term energies
 //! are read back (a few MiB) and the CPU's [`InternalLights::assemble`]
@@ -43,8 +46,8 @@ use super::renderer::{bind_group, compute_pipeline, read_buffer, storage_buffer,
 use super::shaders::{PLACEMENT_MODULE, WALKS_MODULE};
 use crate::physics::internal::clock::term_slots;
 use crate::physics::internal::sources::{
-    kernel_radius_for, place_internal_lights, within_view_reach, InternalLight, InternalLights,
-    InternalParams, LightSources,
+    kernel_radius_for, phase_walks, place_internal_lights, within_view_reach, InternalLight,
+    InternalLights, InternalParams, LightSources,
 };
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::sh::{sh_count, MAX_ORDER};
@@ -123,7 +126,8 @@ pub fn build_internal_lights_gpu(
 ) -> Result<InternalLights, GpuError> {
     // Refuse before any work if the results cannot be bound.
     let n_ext = prepared.lights.suns.len() + prepared.lights.points.len();
-    let stride = record_stride(params, n_ext) as usize;
+    let phase = gpu_phase_walks(params, prepared);
+    let stride = record_stride(params, n_ext, phase) as usize;
     ctx.check_storage_size(
         "internal-light walk results",
         params.lights.max(1) as u64 * stride as u64 * 16,
@@ -152,6 +156,9 @@ pub fn build_internal_lights_gpu(
         if let Some(v) = view.first() {
             sources.view.push(v3(v));
         }
+        if let Some(v) = view.get(1).filter(|_| phase > 0) {
+            sources.phase_view.push(v3(v));
+        }
         sources.push(
             sh[..count].iter().map(v3),
             sh[count..2 * count].iter().map(v3),
@@ -166,7 +173,12 @@ pub fn build_internal_lights_gpu(
         let reach = kernel_radius_for(&prepared.volume, params, &sources.lights);
         sources.kernel_radius = Some(reach);
         let reached = within_view_reach(&prepared.volume, params, reach, &sources.lights);
-        sources.view_from_harmonics_outside(params.sh_order.min(MAX_ORDER), params.eye, &reached);
+        sources.view_from_harmonics_outside(
+            params.sh_order.min(MAX_ORDER),
+            params.eye,
+            prepared.volume.optics.g,
+            &reached,
+        );
     }
     let mut lights_out = InternalLights::assemble(
         &prepared.volume,
@@ -181,14 +193,29 @@ pub fn build_internal_lights_gpu(
     Ok(lights_out)
 }
 
+/// Phase walks per light on the GPU: [`phase_walks`] where there are view
+/// walks.
+fn gpu_phase_walks(params: &InternalParams, prepared: &PreparedScene) -> u32 {
+    if params.view_walks > 0 {
+        phase_walks(params, prepared.volume.optics.g)
+    } else {
+        0
+    }
+}
+
 /// The vec4 per light of the walks' output (see
 /// `shaders/walks/main.wgsl`): the three SH sets, the arrival from each of
 /// `n_ext` external lights, the energies of `k = 1..=N` after `E_0` (those
 /// past [`RESOLVED_TERMS`](crate::physics::internal::clock::RESOLVED_TERMS)
-/// summed in the last), and with view walks their value.
-fn record_stride(params: &InternalParams, n_ext: usize) -> u32 {
+/// summed in the last), with view walks their value, and with phase walks
+/// theirs (`phase`: [`phase_walks`] per light).
+fn record_stride(params: &InternalParams, n_ext: usize, phase: u32) -> u32 {
     let count = sh_count(params.sh_order.min(MAX_ORDER)) as u32;
-    3 * count + n_ext as u32 + term_slots(params.terms) as u32 + u32::from(params.view_walks > 0)
+    3 * count
+        + n_ext as u32
+        + term_slots(params.terms) as u32
+        + u32::from(params.view_walks > 0)
+        + u32::from(phase > 0)
 }
 
 /// A uniform buffer holding `value`.
@@ -364,7 +391,8 @@ fn walk(
     let order = params.sh_order.min(MAX_ORDER);
     let count = sh_count(order) as u32;
     let n_ext = (prepared.lights.suns.len() + prepared.lights.points.len()) as u32;
-    let stride = record_stride(params, n_ext as usize);
+    let phase = gpu_phase_walks(params, prepared);
+    let stride = record_stride(params, n_ext as usize, phase);
     let walks = params.walks.max(1);
     let out_bytes = build.light_count as u64 * stride as u64 * 16;
     ctx.check_storage_size("internal-light walk results", out_bytes)?;
@@ -384,6 +412,10 @@ fn walk(
         record_stride: stride,
         eye: params.eye.to_array(),
         view_walks: params.view_walks,
+        phase_walks: phase,
+        _pad0: 0,
+        _pad1: 0,
+        _pad2: 0,
     };
     let (params_buf, out, group) = ctx.scoped("setting up the internal-light walks", || {
         let params_buf = uniform(ctx, "walk uniform", &walk_params);
@@ -405,7 +437,7 @@ fn walk(
     // One dispatch per block of 64 walks and of at most MAX_GROUPS lights;
     // each adds its sums to `out` (zeroed at creation).
     ctx.scoped("running the internal-light walks", || {
-        for walk_offset in (0..walks + params.view_walks).step_by(WALK_LANES as usize) {
+        for walk_offset in (0..walks + params.view_walks + phase).step_by(WALK_LANES as usize) {
             for light_offset in (0..build.light_count).step_by(MAX_GROUPS as usize) {
                 walk_params.walk_offset = walk_offset;
                 walk_params.light_offset = light_offset;

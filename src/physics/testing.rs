@@ -256,6 +256,7 @@ pub(crate) fn assemble(
             arrival: Vec::new(),
             term_energy: vec![Vec3::ZERO; 2],
             view: Vec::new(),
+            phase_view: Vec::new(),
             kernel_radius: None,
         },
         8.0,

@@ -6,9 +6,8 @@
 //! - [`check_threads`]: a thread count against the machine's cores.
 //! - [`warnings`]: a medium clamped as opaque, a window `s*` far shorter
 //!   than a voxel or far longer than the medium, a kernel wider than the
-//!   medium, a phase function more peaked than the internal lights'
-//!   harmonics follow, many external lights, and work estimates for large
-//!   `spp`, `M` and `K`.
+//!   medium, many external lights, and work estimates for large `spp`,
+//!   `M` and `K`.
 //!
 //! Every message names the flag or field and gives the estimate.
 
@@ -46,15 +45,6 @@ pub const MANY_PASSES: u32 = 1 << 20;
 /// How much shorter than a voxel (or longer than the medium's diagonal) the
 /// window may be before a warning.
 pub const WINDOW_RATIO: f32 = 100.0;
-
-/// Henyey–Greenstein `|g|` above which an internal-lights render warns that
-/// its `L₁` reads the multiply scattered source through harmonics too
-/// coarse for the phase function's peak. The cumulus studies of
-/// [validation](crate::doc::validation) §3.15 (64², against converged
-/// references, eight light sets averaged): the internal-light part
-/// +1.1 % at `g` 0.9, +7.5 % and +3.9 % at 0.95 (lit from the front and
-/// from behind).
-pub const PEAKED_PHASE_G: f32 = 0.9;
 
 /// The memory available to this process, in bytes, where the platform says
 /// (Linux: `MemAvailable`); `None` elsewhere, and then no check is made.
@@ -194,16 +184,6 @@ fn internal_warnings(prepared: &PreparedScene, settings: &RenderSettings, out: &
     let diagonal = (hi - lo).length();
     let voxel = feature_length(&vol.density);
     let params = internal_params(prepared, settings);
-    let g = vol.optics.g;
-    if g.abs() > PEAKED_PHASE_G {
-        out.push(format!(
-            "medium.g: g = {g} is more sharply peaked than the internal lights follow: one more \
-             scattering inside the window (L₁) reads the multiply scattered source through \
-             spherical harmonics of order {}, and at g 0.95 the internal-lights image measured \
-             4–8 % too bright on a cumulus; the reference view is exact at any g",
-            params.sh_order
-        ));
-    }
     let s_star = params.s_star;
     // The window as a length: for the optical-depth clock, at the medium's
     // mean extinction (the default s* is the diagonal's optical depth).

@@ -463,7 +463,6 @@ fn field_l1_at<D: DensityField>(
     budget: f32,
     rng: &mut Rng,
 ) -> Vec3 {
-    let clock = cache.params.clock;
     let mut budget = budget;
     let scatters = cache.params.window_scatters.max(1);
     // The scattering point, its density and the direction light leaves it
@@ -491,45 +490,35 @@ fn field_l1_at<D: DensityField>(
                 throughput /= keep;
             }
         }
+        // With phase walks the first scattering's multiply scattered
+        // source is theirs, read along the camera ray (below); the
+        // direction drawn here then serves `S₁` and the further
+        // scatterings only.
+        let phase_view = scattering == 1 && cache.has_phase_view();
+        if phase_view {
+            sum += phase_view_l1(vol, cache, (point, rho_point, towards), budget, rng);
+        }
         let travel = phase::sample_hg(cache.g, towards, rng.next_f32(), rng.next_f32());
         let back = -travel;
         let Some((_, exit)) = vol.clip(point, back) else {
             break;
         };
-        // The source's distance `r` and `1/pdf(r)`: for the geometric
-        // clock uniform up to where the budget or the box ends; for the
-        // optical-depth clock where a clock drawn uniformly in
-        // `[0, budget]` is reached, `pdf = rate / budget`, so that the
-        // points follow the extinction the integrand carries (`J ∝ ρ`) and
-        // the march stops at the point instead of the budget's end. A
-        // clock past the box's exit finds no source.
-        let (r, inv_pdf, used) = match clock {
-            Clock::Geometric => {
-                let r_max = budget.min(exit);
-                let r = rng.next_f32() * r_max;
-                (r, r_max, r)
-            }
-            Clock::OpticalDepth => {
-                let c = rng.next_f32() * budget;
-                let ray = ClockRay {
-                    clock,
-                    s_star: cache.s_star,
-                    origin: point,
-                    dir: back,
-                    t_exit: exit,
-                };
-                match march_clock_rate(vol, &ray, 0.0, exit, c) {
-                    (ClockMarch::Reached(r), rate) if rate > 0.0 => (r, budget / rate, c),
-                    _ => break,
-                }
-            }
+        // The source's distance ([`source_distance`]).
+        let Some((r, inv_pdf, used)) =
+            source_distance(vol, cache, (point, back, exit), budget, rng)
+        else {
+            break;
         };
         if inv_pdf <= 0.0 {
             break;
         }
         let xp = point + back * r;
         let rho = vol.density.density(xp);
-        let mut j = cache.reconstruct_multi(xp, travel, rho, Part::All);
+        let mut j = if phase_view {
+            Vec3::ZERO
+        } else {
+            cache.reconstruct_multi(xp, travel, rho, Part::All)
+        };
         if rho > 0.0 {
             j += cache.scatter
                 * rho
@@ -551,6 +540,82 @@ fn field_l1_at<D: DensityField>(
         (point, rho_point, towards) = (xp, rho, travel);
     }
     sum
+}
+
+/// The distance `r` from `from` along `back` (the box left at `exit`) to
+/// `L₁`'s source within `budget` of the clock, `1/pdf(r)` and the clock
+/// it uses: for the geometric clock uniform up to where the budget or the
+/// box ends; for the optical-depth clock where a clock drawn uniformly in
+/// `[0, budget]` is reached, `pdf = rate / budget`, so that the points
+/// follow the extinction the integrand carries (`J ∝ ρ`) and the march
+/// stops at the point instead of the budget's end. `None`: a clock past
+/// the box's exit, no source.
+fn source_distance<D: DensityField>(
+    vol: &Volume<D>,
+    cache: &InternalLights,
+    (from, back, exit): (Vec3, Vec3, f32),
+    budget: f32,
+    rng: &mut Rng,
+) -> Option<(f32, f32, f32)> {
+    match cache.params.clock {
+        Clock::Geometric => {
+            let r_max = budget.min(exit);
+            let r = rng.next_f32() * r_max;
+            Some((r, r_max, r))
+        }
+        Clock::OpticalDepth => {
+            let c = rng.next_f32() * budget;
+            let ray = ClockRay {
+                clock: Clock::OpticalDepth,
+                s_star: cache.s_star,
+                origin: from,
+                dir: back,
+                t_exit: exit,
+            };
+            match march_clock_rate(vol, &ray, 0.0, exit, c) {
+                (ClockMarch::Reached(r), rate) if rate > 0.0 => Some((r, budget / rate, c)),
+                _ => None,
+            }
+        }
+    }
+}
+
+/// `L₁`'s first scattering at `y` (density `rho_y`, the eye along
+/// `towards`) of the multiply scattered source, read from the lights'
+/// phase walks ([`super::sources::phase_walks`]): `b(y) ∫ dr T(y, x')
+/// J̃(x')` over `x' = y − r n` along the camera ray within `budget`, one
+/// sample of `r` as [`field_l1_at`] draws it, with `J̃` the source one
+/// more scattering sends towards the eye
+/// ([`InternalLights::reconstruct_phase_view`]). The exact integral
+/// draws `n'` from the phase function and reads `J(y − r n', n')`; the
+/// phase walks turn `n'` at the lights instead, so the point is taken on
+/// the ray: the two differ by `r` times the angle between `n'` and `n`,
+/// at most the window (`s*` mean free paths) across a peak of a few
+/// tens of degrees, where the kernel averages over `h` (validation
+/// §3.15).
+fn phase_view_l1<D: DensityField>(
+    vol: &Volume<D>,
+    cache: &InternalLights,
+    (y, rho_y, towards): (Vec3, f32, Vec3),
+    budget: f32,
+    rng: &mut Rng,
+) -> Vec3 {
+    let back = -towards;
+    let Some((_, exit)) = vol.clip(y, back) else {
+        return Vec3::ZERO;
+    };
+    let Some((r, inv_pdf, _)) = source_distance(vol, cache, (y, back, exit), budget, rng) else {
+        return Vec3::ZERO;
+    };
+    if inv_pdf <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let xp = y + back * r;
+    let j = cache.reconstruct_phase_view(xp, vol.density.density(xp));
+    if j == Vec3::ZERO {
+        return Vec3::ZERO;
+    }
+    cache.scatter * rho_y * GATHER_TRANSMITTANCE.estimate(vol, y, back, r, rng) * inv_pdf * j
 }
 
 #[cfg(test)]
@@ -629,6 +694,7 @@ mod tests {
                     arrival: Vec::new(),
                     term_energy: vec![Vec3::ZERO; 2],
                     view: Vec::new(),
+                    phase_view: Vec::new(),
                     kernel_radius: None,
                 },
                 8.0,
@@ -847,6 +913,7 @@ mod tests {
                         arrival: vec![Vec3::ONE],
                         term_energy: vec![Vec3::ZERO; terms as usize + 1],
                         view: Vec::new(),
+                        phase_view: Vec::new(),
                         kernel_radius: None,
                     },
                     8.0,

@@ -78,16 +78,39 @@ impl InternalLights {
     /// `reconstruct_multi(p, n, density_at_p, Part::Scattered)` for `n`
     /// towards the eye. Zero without view walks.
     pub fn reconstruct_view(&self, p: Vec3, density_at_p: f32) -> Vec3 {
+        self.reconstruct_per_light(&self.fine_view, p, density_at_p)
+    }
+
+    /// The kernel average at `p` of one value per light (`values` in the
+    /// fine grid's slot order), scaled as the harmonics are; zero where
+    /// `values` is empty or no light is within `h`.
+    fn reconstruct_per_light(&self, values: &[Vec3], p: Vec3, density_at_p: f32) -> Vec3 {
         let scale_p = self.reconstruction_scale(density_at_p);
-        if scale_p <= 0.0 || self.fine_view.is_empty() {
+        if scale_p <= 0.0 || values.is_empty() {
             return Vec3::ZERO;
         }
         let mut sum = [0.0f32; 3];
-        let den = self.kernel_sum(p, bytemuck::cast_slice(&self.fine_view), &mut sum);
+        let den = self.kernel_sum(p, bytemuck::cast_slice(values), &mut sum);
         if den <= 0.0 {
             return Vec3::ZERO;
         }
         Vec3::from_array(sum) * (scale_p / den)
+    }
+
+    /// Whether the lights carry phase walks' values
+    /// ([`super::sources::phase_walks`]).
+    pub fn has_phase_view(&self) -> bool {
+        !self.fine_phase_view.is_empty()
+    }
+
+    /// The source one more scattering sends towards the eye at `p`,
+    /// `∫ P(n·n') J(p, n') dn'` for `n` towards the eye: the kernel average
+    /// of the lights' phase-walk means ([`super::sources::phase_walks`]),
+    /// as [`InternalLights::reconstruct_multi`] averages the harmonics
+    /// (all of `Σ_{k≥1} J_k`, not per unit chance). Zero without phase
+    /// walks.
+    pub fn reconstruct_phase_view(&self, p: Vec3, density_at_p: f32) -> Vec3 {
+        self.reconstruct_per_light(&self.fine_phase_view, p, density_at_p)
     }
 
     /// Adds `K_h(p − x_i) / c_i` times each kernel light's row of `table`

@@ -207,6 +207,34 @@ pub const KERNEL_NEIGHBOURS: u32 = 64;
 /// and that chance grows fast as the kernel holds fewer.
 pub const KERNEL_NEIGHBOURS_FLOOR: u32 = 16;
 
+/// The least `|g|` at which the lights that walk towards the eye also run
+/// phase walks ([`phase_walks`]). Below it the multiply scattered source
+/// is smooth in angle and its harmonics serve `L₁`; above it they ring
+/// about its peak (validation §3.15: a cumulus with `g` 0.95 came out
+/// 7.5 % bright, a back-lit sphere with `g` 0.85 3.2 % dark).
+pub const PHASE_WALKS_MIN_G: f32 = 0.75;
+
+/// View walks per phase walk ([`phase_walks`]). Their value is one more
+/// average per light, and a quarter as many walks as the view's cost the
+/// cumulus's sets about a tenth more time (validation §3.15).
+pub const VIEW_WALKS_PER_PHASE_WALK: u32 = 4;
+
+/// Phase walks per light with `params` in a medium of asymmetry `g`: one
+/// per [`VIEW_WALKS_PER_PHASE_WALK`] view walks where `|g|` ≥
+/// [`PHASE_WALKS_MIN_G`], otherwise none. A phase walk starts towards the
+/// eye turned by one draw of the phase function, `n' ~ P(n_i · n')`, and
+/// keeps all of `Σ_{k≥1} J_k(x_i, n')`: their mean estimates the source
+/// one more scattering sends towards the eye, `∫ P(n_i·n') J(x_i, n') dn'`,
+/// which `L₁`'s first scattering reads
+/// ([`InternalLights::reconstruct_phase_view`]) instead of the harmonics.
+pub fn phase_walks(params: &InternalParams, g: f32) -> u32 {
+    if g.abs() >= PHASE_WALKS_MIN_G {
+        params.view_walks.div_ceil(VIEW_WALKS_PER_PHASE_WALK)
+    } else {
+        0
+    }
+}
+
 /// Lights the automatic kernel holds in light set `set` of a render
 /// (0-based): [`KERNEL_NEIGHBOURS`]` / (set + 1)`, at least
 /// [`KERNEL_NEIGHBOURS_FLOOR`] — 64, 32, 21, then 16.
@@ -376,6 +404,10 @@ pub struct InternalLights {
     pub(crate) view: Vec<Vec3>,
     /// `view` aligned with `fine.ids()`.
     pub(super) fine_view: Vec<Vec3>,
+    /// [`LightSources::phase_view`]: per light (empty without phase walks).
+    pub(crate) phase_view: Vec<Vec3>,
+    /// `phase_view` aligned with `fine.ids()`.
+    pub(super) fine_phase_view: Vec<Vec3>,
     pub(super) fine_multi: Vec<Vec3>,
     pub(super) fine_scattered: Vec<Vec3>,
     /// Light clusters for the gather's light selection.
@@ -416,6 +448,10 @@ pub struct LightSources {
     /// of the collision (see the module doc, "Walks towards the eye");
     /// empty without view walks.
     pub view: Vec<Vec3>,
+    /// Per light, the mean of its phase walks ([`phase_walks`]): the
+    /// source one more scattering sends towards the eye; empty without
+    /// phase walks.
+    pub phase_view: Vec<Vec3>,
     /// The kernel radius of these lights, if the walks already chose it
     /// ([`kernel_radius_for`]: the view walks needed it to know which
     /// lights the camera reads); `None`: [`InternalLights::assemble`]
@@ -442,6 +478,7 @@ impl LightSources {
             arrival: Vec::with_capacity(m * n_ext),
             term_energy: vec![Vec3::ZERO; gates],
             view: Vec::new(),
+            phase_view: Vec::new(),
             kernel_radius: None,
         }
     }
@@ -468,15 +505,19 @@ impl LightSources {
     /// Sets the view value of each light with `reached[i]` false to its
     /// harmonics' collided part evaluated towards `eye` (what
     /// `reconstruct_multi(…, Part::Scattered)` reads of the light for a
-    /// camera ray), instead of view walks it did not run (see
+    /// camera ray), and its phase-walk value to the harmonics of all of
+    /// `Σ_{k≥1} J_k` convolved with the phase function (band `l` times
+    /// `g^l`) towards `eye`, instead of walks it did not run (see
     /// [`within_view_reach`]). Does nothing without view values.
-    pub fn view_from_harmonics_outside(&mut self, order: u32, eye: Vec3, reached: &[bool]) {
+    pub fn view_from_harmonics_outside(&mut self, order: u32, eye: Vec3, g: f32, reached: &[bool]) {
         let count = sh_count(order);
         if self.view.len() != self.lights.len()
             || self.scattered_coeffs.len() < self.lights.len() * count
+            || self.multi_coeffs.len() < self.lights.len() * count
         {
             return;
         }
+        let phase = self.phase_view.len() == self.lights.len();
         let mut y = [0.0f32; MAX_COUNT];
         for (i, light) in self.lights.iter().enumerate() {
             if reached.get(i).copied().unwrap_or(true) {
@@ -484,8 +525,15 @@ impl LightSources {
             }
             let n = (eye - light.position).try_normalize().unwrap_or(Vec3::Z);
             sh_basis(order, n, &mut y);
-            self.view[i] =
-                InternalLights::eval_sh(&self.scattered_coeffs[i * count..(i + 1) * count], &y);
+            let coeffs = i * count..(i + 1) * count;
+            self.view[i] = InternalLights::eval_sh(&self.scattered_coeffs[coeffs.clone()], &y);
+            if phase {
+                // Index `l(l+1) + m` is band `l = ⌊√index⌋`.
+                for (index, yc) in y[..count].iter_mut().enumerate() {
+                    *yc *= g.powi((index as f32).sqrt().floor() as i32);
+                }
+                self.phase_view[i] = InternalLights::eval_sh(&self.multi_coeffs[coeffs], &y);
+            }
         }
     }
 }
@@ -806,6 +854,7 @@ impl InternalLights {
                     phi0,
                     to_eye,
                     view: Vec3::ZERO,
+                    phase: Vec3::ZERO,
                     f: vec![Vec3::ZERO; count],
                     multi: vec![Vec3::ZERO; count],
                     scattered: vec![Vec3::ZERO; count],
@@ -827,6 +876,11 @@ impl InternalLights {
         } else {
             0
         };
+        let phase_count = if view_walks > 0 {
+            phase_walks(params, vol.optics.g)
+        } else {
+            0
+        };
         let total_rounds = walks.max(view_walks);
         let mut rounds = 0;
         while rounds < total_rounds {
@@ -835,6 +889,7 @@ impl InternalLights {
             }
             let lattice_point = lattice.get(rounds as usize).copied();
             let towards_eye = rounds < view_walks;
+            let phase_turned = rounds < phase_count;
             walked.par_iter_mut().zip(&lights).for_each_init(
                 || (vec![Vec3::ZERO; slots], vec![Vec3::ZERO; slots]),
                 |(per_walk, unscattered), (state, light)| {
@@ -859,6 +914,9 @@ impl InternalLights {
                     if let Some(n) = state.to_eye.filter(|_| towards_eye) {
                         state.view += walker.accumulate_collided(x, n, &mut state.rng);
                     }
+                    if let Some(n) = state.to_eye.filter(|_| phase_turned) {
+                        state.phase += phase_walk(&walker, x, n, &mut state.rng, per_walk);
+                    }
                 },
             );
             if cancel.load(Ordering::Relaxed) {
@@ -875,6 +933,7 @@ impl InternalLights {
         // their sum once).
         let lattice_done = rounds.min(walks);
         let view_done = rounds.min(view_walks);
+        let phase_done = rounds.min(phase_count);
         let w_dir = 4.0 * std::f32::consts::PI / lattice_done as f32;
         walked
             .par_iter_mut()
@@ -884,6 +943,9 @@ impl InternalLights {
                 let sums = sums.chain(&mut state.scattered);
                 sums.chain(state.energy.iter_mut().skip(1))
                     .for_each(|v| *v *= w_dir);
+                if phase_done > 0 {
+                    state.phase /= phase_done as f32;
+                }
                 if let Some(n) = state.to_eye.filter(|_| state.view != Vec3::ZERO) {
                     let x = light.position;
                     state.view /=
@@ -899,9 +961,12 @@ impl InternalLights {
             if params.view_walks > 0 {
                 sources.view.push(w.view);
             }
+            if phase_count > 0 {
+                sources.phase_view.push(w.phase);
+            }
             sources.push(w.f, w.multi, w.scattered, w.arrival, w.energy);
         }
-        sources.view_from_harmonics_outside(order, params.eye, &reached);
+        sources.view_from_harmonics_outside(order, params.eye, vol.optics.g, &reached);
         let t_walk = start.elapsed().as_secs_f64();
 
         let mut out = Self::assemble(vol, external, params, sources, density_integral);
@@ -929,6 +994,7 @@ impl InternalLights {
             arrival,
             term_energy,
             view,
+            phase_view,
             kernel_radius,
         } = sources;
         let start = Instant::now();
@@ -987,6 +1053,16 @@ impl InternalLights {
         } else {
             fine.ids().iter().map(|&i| view[i as usize]).collect()
         };
+        let phase_view = if phase_view.len() == lights.len() {
+            phase_view
+        } else {
+            Vec::new()
+        };
+        let fine_phase_view: Vec<Vec3> = if phase_view.is_empty() {
+            Vec::new()
+        } else {
+            fine.ids().iter().map(|&i| phase_view[i as usize]).collect()
+        };
         let fine_multi = by_slot(&multi_coeffs);
         let fine_scattered = by_slot(&scattered_coeffs);
         let sky = sky_arrival(vol, external, params, &lights, order);
@@ -1026,6 +1102,8 @@ impl InternalLights {
             fine_points,
             view,
             fine_view,
+            phase_view,
+            fine_phase_view,
             fine_multi,
             fine_scattered,
             clusters: LightGrid::build(&[], |_| false, vol.bounds, 1.0, 1),
@@ -1225,6 +1303,8 @@ struct Walked {
     to_eye: Option<Vec3>,
     /// The walks towards the eye: their collided part, summed.
     view: Vec3,
+    /// The phase walks ([`phase_walks`]): all of `Σ_{k≥1} J_k`, summed.
+    phase: Vec3,
     /// `F`, `Σ J_k` and its collided part by direction (spherical
     /// harmonics) and the terms' energies `k ≥ 1`: sums over the walks,
     /// unweighted until the walks are done. `energy[0]` is the `k = 0`
@@ -1249,6 +1329,23 @@ fn lattice_direction(w: u32, walks: u32, rotation: glam::Quat, phi0: f32) -> Vec
 /// the walk to the light's sums, unweighted: `F` (term 1), `Σ J_k` and its
 /// collided part projected on the harmonics of `order`, and the terms'
 /// energies (`per_walk` and `unscattered` are scratch, one slot per term).
+/// One phase walk from `x` ([`phase_walks`]): the direction towards the
+/// eye `n` turned by one draw of the phase function, and all of
+/// `Σ_{k≥1} J_k` there (`per_walk` is scratch of the gates' slots).
+fn phase_walk<D: DensityField>(
+    walker: &Walks<'_, D>,
+    x: Vec3,
+    n: Vec3,
+    rng: &mut Rng,
+    per_walk: &mut [Vec3],
+) -> Vec3 {
+    let turned =
+        crate::physics::phase::sample_hg(walker.vol.optics.g, n, rng.next_f32(), rng.next_f32());
+    per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
+    walker.accumulate_j_from(x, turned, 1, rng, per_walk, None);
+    per_walk[1..].iter().sum()
+}
+
 fn walk_direction<D: DensityField>(
     walker: &Walks<'_, D>,
     (x, n, weight): (Vec3, Vec3, f32),
@@ -1417,6 +1514,116 @@ mod tests {
         assert!(
             (got - want).abs().max_element() <= 1e-4 * want.max_element(),
             "reconstruct_view {got}, kernel average {want}"
+        );
+    }
+
+    /// In a medium peaked enough for phase walks, their mean at each light
+    /// is the source one more scattering sends towards the eye,
+    /// `∫ P(n·n') J(x, n') dn'`: here against the same integral sampled
+    /// the other way, walks in uniform directions weighted `4π P(n·n')`,
+    /// at 64 of the lights within the camera's reach. Lights out of reach
+    /// hold their harmonics of `Σ J_k` with band `l` times `g^l` (the
+    /// convolution with the phase function) towards the eye.
+    #[test]
+    fn phase_walks_estimate_the_phase_weighted_source_towards_the_eye() {
+        use crate::physics::sh::sh_basis;
+        use std::sync::atomic::AtomicBool;
+        let g = 0.75;
+        let vol = cube(1.5, 0.9, g);
+        let sun = one_sun(Vec3::new(0.3, -0.2, -1.0), Vec3::new(1.0, 2.0, 3.0));
+        let eye = Vec3::new(0.4, 0.3, 4.0);
+        let params = InternalParams {
+            lights: 1024,
+            walks: 64,
+            sh_order: 4,
+            kernel_radius: None,
+            view_walks: 1024,
+            eye,
+            view_share: 0.0,
+            view_frame: Default::default(),
+            ..sh1_params(Clock::OpticalDepth, 0.5, 24, 0.3, L1Form::Field)
+        };
+        assert_eq!(phase_walks(&params, g), 256);
+        assert_eq!(phase_walks(&params, -g), 256);
+        assert_eq!(phase_walks(&params, 0.7), 0);
+        let cache = InternalLights::build(&vol, &sun, &params, &AtomicBool::new(false))
+            .expect("not cancelled");
+        assert!(cache.has_phase_view());
+        let count = sh_count(4);
+        let mut y = vec![0.0f32; count];
+        let reached = within_view_reach(&vol, &params, cache.kernel_radius, &cache.lights);
+        let walker = Walks::guided(
+            &vol,
+            &sun,
+            GateSettings {
+                s_star: params.s_star,
+                n_terms: params.terms,
+                clock: params.clock,
+                rr_start: RR_START_DEPTH,
+            },
+        );
+        let mut per_walk = vec![Vec3::ZERO; walker.gates.term_slots()];
+        let mut rng = Rng::for_sample(77, 0, 0);
+        let (mut compared, mut phase, mut uniform, mut diff2) = (0usize, 0.0f64, 0.0f64, 0.0f64);
+        for (i, &within) in reached.iter().enumerate() {
+            let x = cache.lights[i].position;
+            let n = (eye - x).normalize();
+            let v = cache.phase_view[i].element_sum() as f64;
+            if !within {
+                sh_basis(4, n, &mut y);
+                for (index, yc) in y.iter_mut().enumerate() {
+                    *yc *= g.powi((index as f32).sqrt().floor() as i32);
+                }
+                let t = InternalLights::eval_sh(cache.multi_coefficients(i), &y).element_sum();
+                assert!(
+                    (v as f32 - t).abs() <= 1e-5 * t.abs().max(1e-3),
+                    "light {i} out of reach: {v}, harmonics {t}"
+                );
+                continue;
+            }
+            if compared == 64 {
+                continue;
+            }
+            compared += 1;
+            let walks = 1024;
+            let mut sum = 0.0f64;
+            for _ in 0..walks {
+                let z = 1.0 - 2.0 * rng.next_f32();
+                let phi = 2.0 * std::f32::consts::PI * rng.next_f32();
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                let w = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+                per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
+                walker.accumulate_j_from(x, w, 1, &mut rng, &mut per_walk, None);
+                let weight = 4.0 * std::f32::consts::PI * crate::physics::phase::hg(g, n.dot(w));
+                sum += (per_walk[1..].iter().sum::<Vec3>() * weight).element_sum() as f64;
+            }
+            let t = sum / walks as f64;
+            phase += v;
+            uniform += t;
+            diff2 += (v - t) * (v - t);
+        }
+        assert_eq!(compared, 64, "too few lights within reach");
+        let m = compared as f64;
+        let (phase, uniform) = (phase / m, uniform / m);
+        let se = (diff2 / m - (phase - uniform).powi(2)).max(0.0).sqrt() / m.sqrt();
+        eprintln!("phase walks {phase:.5}, uniform walks weighted by the phase function {uniform:.5} (se {se:.5})");
+        assert!(
+            (phase - uniform).abs() < 4.5 * se && (phase - uniform).abs() < 0.05 * uniform,
+            "phase walks {phase:.5}, uniform walks weighted by the phase function {uniform:.5} (se {se:.5})"
+        );
+        // The reconstruction is the normalised kernel average of the values.
+        let p = Vec3::new(0.1, -0.2, 0.3);
+        let (mut num, mut den) = (Vec3::ZERO, 0.0f32);
+        cache.for_each_kernel_weight(p, |i, k| {
+            let scale = 1.0 / (1.5 * cache.lights[i].density);
+            num += cache.phase_view[i] * (k * scale);
+            den += k;
+        });
+        let want = num / den * 1.5;
+        let got = cache.reconstruct_phase_view(p, 1.0);
+        assert!(
+            (got - want).abs().max_element() <= 1e-4 * want.max_element(),
+            "reconstruct_phase_view {got}, kernel average {want}"
         );
     }
 
