@@ -1502,18 +1502,30 @@ mod tests {
             "towards the eye {towards:.5} and away {away:.5} hardly differ: the test cannot tell"
         );
         // The reconstruction is the normalised kernel average of the views.
+        let view = |i: usize| cache.view(i).expect("a view estimate");
+        assert_kernel_average(&cache, view, |p| cache.reconstruct_view(p, 1.0));
+    }
+
+    /// `reconstruct(p)` at a point of the test cube (`σ_t` 1.5, density 1)
+    /// is the normalised kernel average of each light's `value`, scaled as
+    /// the optical-depth clock's reconstruction scales it.
+    fn assert_kernel_average(
+        cache: &InternalLights,
+        value: impl Fn(usize) -> Vec3,
+        reconstruct: impl Fn(Vec3) -> Vec3,
+    ) {
         let p = Vec3::new(0.1, -0.2, 0.3);
         let (mut num, mut den) = (Vec3::ZERO, 0.0f32);
         cache.for_each_kernel_weight(p, |i, k| {
             let scale = 1.0 / (1.5 * cache.lights[i].density);
-            num += cache.view(i).expect("a view estimate") * (k * scale);
+            num += value(i) * (k * scale);
             den += k;
         });
         let want = num / den * 1.5;
-        let got = cache.reconstruct_view(p, 1.0);
+        let got = reconstruct(p);
         assert!(
             (got - want).abs().max_element() <= 1e-4 * want.max_element(),
-            "reconstruct_view {got}, kernel average {want}"
+            "reconstruction {got}, kernel average {want}"
         );
     }
 
@@ -1612,18 +1624,10 @@ mod tests {
             "phase walks {phase:.5}, uniform walks weighted by the phase function {uniform:.5} (se {se:.5})"
         );
         // The reconstruction is the normalised kernel average of the values.
-        let p = Vec3::new(0.1, -0.2, 0.3);
-        let (mut num, mut den) = (Vec3::ZERO, 0.0f32);
-        cache.for_each_kernel_weight(p, |i, k| {
-            let scale = 1.0 / (1.5 * cache.lights[i].density);
-            num += cache.phase_view[i] * (k * scale);
-            den += k;
-        });
-        let want = num / den * 1.5;
-        let got = cache.reconstruct_phase_view(p, 1.0);
-        assert!(
-            (got - want).abs().max_element() <= 1e-4 * want.max_element(),
-            "reconstruct_phase_view {got}, kernel average {want}"
+        assert_kernel_average(
+            &cache,
+            |i| cache.phase_view[i],
+            |p| cache.reconstruct_phase_view(p, 1.0),
         );
     }
 
