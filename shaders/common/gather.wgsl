@@ -412,6 +412,41 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     return out;
 }
 
+// The distance `r` from `origin` along `back` (the box left at `exit`) to
+// `L₁`'s source within `budget` of the clock, `1/pdf(r)` and the clock it
+// uses (`source_distance` in gather.rs): uniform up to where the budget or
+// the box ends (geometric clock), or where a clock drawn uniformly in
+// `[0, budget]` is reached, `pdf = rate / budget` (optical depth; past the
+// box's exit: not found, no source).
+struct SourceDistance {
+    found: bool,
+    r: f32,
+    inv_pdf: f32,
+    used: f32,
+}
+
+fn source_distance(
+    origin: vec3<f32>,
+    back: vec3<f32>,
+    exit: f32,
+    budget: f32,
+    rng: ptr<function, Rng>,
+) -> SourceDistance {
+    let clock = gather_params.clock;
+    if clock == CLOCK_GEOMETRIC {
+        let r_max = min(budget, exit);
+        let r = rng_next_f32(rng) * r_max;
+        return SourceDistance(r_max > 0.0, r, r_max, r);
+    }
+    let c = rng_next_f32(rng) * budget;
+    let m = march_clock(clock, gather_params.s_star, origin, back, 0.0, exit, exit, c);
+    if !m.reached || m.rate <= 0.0 {
+        return SourceDistance(false, 0.0, 0.0, 0.0);
+    }
+    let inv_pdf = budget / m.rate;
+    return SourceDistance(inv_pdf > 0.0, m.value, inv_pdf, c);
+}
+
 // `L₁`'s first scattering at `y` of the multiply scattered source read
 // from the lights' phase walks along the camera ray (`phase_view_l1` in
 // gather.rs): `b(y) ∫ dr T(y, x') J̃(x')`, `x' = y − r n`, one sample of
@@ -428,31 +463,16 @@ fn phase_view_l1(
     if !bc.hit {
         return vec3<f32>(0.0);
     }
-    let exit = bc.t1;
-    var r = 0.0;
-    var inv_pdf = 0.0;
-    if gather_params.clock == CLOCK_GEOMETRIC {
-        let r_max = min(budget, exit);
-        r = rng_next_f32(rng) * r_max;
-        inv_pdf = r_max;
-    } else {
-        let c = rng_next_f32(rng) * budget;
-        let m = march_clock(gather_params.clock, gather_params.s_star, y, back, 0.0, exit, exit, c);
-        if !m.reached || m.rate <= 0.0 {
-            return vec3<f32>(0.0);
-        }
-        r = m.value;
-        inv_pdf = budget / m.rate;
-    }
-    if inv_pdf <= 0.0 {
+    let d = source_distance(y, back, bc.t1, budget, rng);
+    if !d.found {
         return vec3<f32>(0.0);
     }
-    let xp = y + back * r;
+    let xp = y + back * d.r;
     let j = reconstruct_phase_view(xp, density(xp));
     if all(j == vec3<f32>(0.0)) {
         return vec3<f32>(0.0);
     }
-    return gather_params.scatter * rho_y * transmittance_by(y, back, r, GATHER_TRANSMITTANCE, rng) * inv_pdf * j;
+    return gather_params.scatter * rho_y * transmittance_by(y, back, d.r, GATHER_TRANSMITTANCE, rng) * d.inv_pdf * j;
 }
 
 // `L₁`'s integrand at the camera-ray point `y = x + t dir` (without
@@ -470,7 +490,6 @@ fn field_l1_at(
     rho_y: f32,
     rng: ptr<function, Rng>,
 ) -> vec3<f32> {
-    let clock = gather_params.clock;
     var budget = budget_in;
     let scatters = max(gather_params.window_scatters, 1u);
     var point = y;
@@ -509,32 +528,12 @@ fn field_l1_at(
         if !bc.hit {
             break;
         }
-        let exit = bc.t1;
-        // The source's distance `r` and `1/pdf(r)`: uniform up to where the
-        // budget or the box ends (geometric clock), or where a clock drawn
-        // uniformly in `[0, budget]` is reached, `pdf = rate / budget`
-        // (optical depth; past the box's exit: no source).
-        var r = 0.0;
-        var inv_pdf = 0.0;
-        var used = 0.0;
-        if clock == CLOCK_GEOMETRIC {
-            let r_max = min(budget, exit);
-            r = rng_next_f32(rng) * r_max;
-            inv_pdf = r_max;
-            used = r;
-        } else {
-            let c = rng_next_f32(rng) * budget;
-            let m = march_clock(clock, gather_params.s_star, point, back, 0.0, exit, exit, c);
-            if !m.reached || m.rate <= 0.0 {
-                break;
-            }
-            r = m.value;
-            inv_pdf = budget / m.rate;
-            used = c;
-        }
-        if inv_pdf <= 0.0 {
+        let d = source_distance(point, back, bc.t1, budget, rng);
+        if !d.found {
             break;
         }
+        let r = d.r;
+        let inv_pdf = d.inv_pdf;
         let xp = point + back * r;
         let rho = density(xp);
         var jv = vec3<f32>(0.0);
@@ -554,7 +553,7 @@ fn field_l1_at(
         if !more || all(throughput == vec3<f32>(0.0)) {
             break;
         }
-        budget -= used;
+        budget -= d.used;
         point = xp;
         rho_point = rho;
         towards = travel;
