@@ -447,9 +447,10 @@ fn source_distance(
     return SourceDistance(inv_pdf > 0.0, m.value, inv_pdf, c);
 }
 
-// `L₁`'s first scattering at `y` of the multiply scattered source read
-// from the lights' phase walks along the camera ray (`phase_view_l1` in
-// gather.rs): `b(y) ∫ dr T(y, x') J̃(x')`, `x' = y − r n`, one sample of
+// One scattering of `L₁` at `y` (light leaving along `n`: the eye for the
+// first, the last step's direction for the further ones) of the multiply
+// scattered source read from the lights' phase walks along `n`
+// (`phase_view_l1` in gather.rs): `b(y) ∫ dr T(y, x') J̃(x')`, `x' = y − r n`, one sample of
 // `r` as `field_l1_at` draws it.
 fn phase_view_l1(
     n: vec3<f32>,
@@ -513,12 +514,13 @@ fn field_l1_at(
                 throughput /= keep;
             }
         }
-        // With phase walks the first scattering's multiply scattered
-        // source is theirs, read along the camera ray; the direction drawn
-        // below then serves `S₁` and the further scatterings only.
-        let phase_view = scattering == 1u && gather_params.has_phase_view == 1u;
+        // With phase walks each scattering's multiply scattered source is
+        // theirs, read along the direction light leaves the scattering
+        // point in; the direction drawn below then serves `S₁` and the
+        // further scatterings only.
+        let phase_view = gather_params.has_phase_view == 1u;
         if phase_view {
-            sum += phase_view_l1(towards, budget, point, rho_point, rng);
+            sum += throughput * phase_view_l1(towards, budget, point, rho_point, rng);
         }
         let u1 = rng_next_f32(rng);
         let u2 = rng_next_f32(rng);

@@ -273,8 +273,9 @@ pub struct GpuGatherParams {
     /// Vec4 table offset: per light the phase walks' mean
     /// (`InternalLights::reconstruct_phase_view`), if `has_phase_view`.
     pub phase_view_offset: u32,
-    /// 1: `L₁`'s first scattering reads the phase walks' values along the
-    /// camera ray; 0: the harmonics in the direction it draws.
+    /// 1: each scattering of `L₁` reads the phase walks' values along the
+    /// direction light leaves it in; 0: the harmonics in the direction it
+    /// draws.
     pub has_phase_view: u32,
     /// Padding to a multiple of 16 bytes.
     pub _pad0: u32,

@@ -490,13 +490,16 @@ fn field_l1_at<D: DensityField>(
                 throughput /= keep;
             }
         }
-        // With phase walks the first scattering's multiply scattered
-        // source is theirs, read along the camera ray (below); the
-        // direction drawn here then serves `S₁` and the further
-        // scatterings only.
-        let phase_view = scattering == 1 && cache.has_phase_view();
+        // With phase walks each scattering's multiply scattered source is
+        // theirs, read along the direction light leaves the scattering
+        // point in (below); the direction drawn here then serves `S₁` and
+        // the further scatterings only. The harmonics, read in a direction
+        // drawn from a sharp forward peak, ring: a thin smoke with `g` 0.9
+        // read its second scattering's share five times too bright
+        // (validation §3.16).
+        let phase_view = cache.has_phase_view();
         if phase_view {
-            sum += phase_view_l1(vol, cache, (point, rho_point, towards), budget, rng);
+            sum += throughput * phase_view_l1(vol, cache, (point, rho_point, towards), budget, rng);
         }
         let travel = phase::sample_hg(cache.g, towards, rng.next_f32(), rng.next_f32());
         let back = -travel;
@@ -580,19 +583,21 @@ fn source_distance<D: DensityField>(
     }
 }
 
-/// `L₁`'s first scattering at `y` (density `rho_y`, the eye along
-/// `towards`) of the multiply scattered source, read from the lights'
+/// One scattering of `L₁` at `y` (density `rho_y`, light leaving along
+/// `towards`: the eye for the first, the last step's direction for the
+/// further ones) of the multiply scattered source, read from the lights'
 /// phase walks ([`super::sources::phase_walks`]): `b(y) ∫ dr T(y, x')
-/// J̃(x')` over `x' = y − r n` along the camera ray within `budget`, one
+/// J̃(x')` over `x' = y − r n` along `n` = `towards` within `budget`, one
 /// sample of `r` as [`field_l1_at`] draws it, with `J̃` the source one
 /// more scattering sends towards the eye
 /// ([`InternalLights::reconstruct_phase_view`]). The exact integral
 /// draws `n'` from the phase function and reads `J(y − r n', n')`; the
 /// phase walks turn `n'` at the lights instead, so the point is taken on
-/// the ray: the two differ by `r` times the angle between `n'` and `n`,
+/// the line: the two differ by `r` times the angle between `n'` and `n`,
 /// at most the window (`s*` mean free paths) across a peak of a few
 /// tens of degrees, where the kernel averages over `h` (validation
-/// §3.15).
+/// §3.15). A further scattering also takes its own direction for the
+/// eye's, within the phase function's peak of it (§3.16).
 fn phase_view_l1<D: DensityField>(
     vol: &Volume<D>,
     cache: &InternalLights,

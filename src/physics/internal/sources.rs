@@ -225,7 +225,7 @@ pub const VIEW_WALKS_PER_PHASE_WALK: u32 = 4;
 /// eye turned by one draw of the phase function, `n' ~ P(n_i · n')`, and
 /// keeps all of `Σ_{k≥1} J_k(x_i, n')`: their mean estimates the source
 /// one more scattering sends towards the eye, `∫ P(n_i·n') J(x_i, n') dn'`,
-/// which `L₁`'s first scattering reads
+/// which every scattering of `L₁` reads
 /// ([`InternalLights::reconstruct_phase_view`]) instead of the harmonics.
 pub fn phase_walks(params: &InternalParams, g: f32) -> u32 {
     if g.abs() >= PHASE_WALKS_MIN_G {
