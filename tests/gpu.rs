@@ -577,19 +577,25 @@ fn gather_agrees_chromatic_sphere_three_window_scatterings() {
     });
 }
 
+/// The puffs' settings of the view- and phase-walk gathers: one light set
+/// of 2048 lights with 16 spread walks and 16 walks towards the eye each.
+fn puffs_view_walks(s: &mut InternalSettings) {
+    s.knobs.s_star = Some(0.5);
+    s.knobs.terms = 40;
+    s.knobs.lights = 2048;
+    s.expert.walks = 16;
+    s.expert.view_walks = 16;
+}
+
 /// Walks towards the eye (`view_walks`): the GPU's `L₀` averages the
 /// lights' view estimates as the CPU's does. One light set of 16 spread
 /// walks per light, whose harmonics are far noisier than the view walks'
 /// values, so a GPU that evaluated the harmonics instead would disagree.
 #[test]
 fn gather_agrees_puffs_view_walks() {
-    let Some((_, _, cache)) = agree_gather_with("assets/scenes/puffs_grid.ron", 24, 256, |s| {
-        s.knobs.s_star = Some(0.5);
-        s.knobs.terms = 40;
-        s.knobs.lights = 2048;
-        s.expert.walks = 16;
-        s.expert.view_walks = 16;
-    }) else {
+    let Some((_, _, cache)) =
+        agree_gather_with("assets/scenes/puffs_grid.ron", 24, 256, puffs_view_walks)
+    else {
         return;
     };
     assert!(cache.has_view());
@@ -605,13 +611,8 @@ fn gather_agrees_puffs_phase_walks() {
         s.camera.height = 24;
         s.medium.g = 0.85;
     }));
-    let Some((_, _, cache)) = agree_gather_prepared(scene, prepared, 24, 256, |s| {
-        s.knobs.s_star = Some(0.5);
-        s.knobs.terms = 40;
-        s.knobs.lights = 2048;
-        s.expert.walks = 16;
-        s.expert.view_walks = 16;
-    }) else {
+    let Some((_, _, cache)) = agree_gather_prepared(scene, prepared, 24, 256, puffs_view_walks)
+    else {
         return;
     };
     assert!(cache.has_view() && cache.has_phase_view());

@@ -112,6 +112,17 @@ pub fn sh_basis(order: u32, dir: Vec3, out: &mut [f32]) {
     out[..count].copy_from_slice(&full[..count]);
 }
 
+/// Multiplies each basis value `Y_i(n)` in `basis` by `g^l`, `l` its band
+/// (index `l(l+1) + m` is band `⌊√index⌋`): the Henyey–Greenstein phase
+/// function's Legendre coefficients. A series `f = Σ c_i Y_i` evaluated
+/// with the scaled basis at `n` is then `∫ P(n·n') f(n') dn'` (Funk–Hecke):
+/// the series convolved with the phase function.
+pub fn hg_convolve_basis(basis: &mut [f32], g: f32) {
+    for (index, y) in basis.iter_mut().enumerate() {
+        *y *= g.powi((index as f32).sqrt().floor() as i32);
+    }
+}
+
 /// An RGB function on the sphere as real SH coefficients of one order.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShRgb {
@@ -174,6 +185,7 @@ impl ShRgb {
 mod tests {
     use super::*;
     use crate::physics::rng::Rng;
+    use crate::physics::testing::uniform_direction;
     use std::f64::consts::PI;
 
     /// A Fibonacci lattice of `n` directions with equal weights `4π/n`.
@@ -326,10 +338,7 @@ mod tests {
         let k = 400_000;
         let mut mc = ShRgb::new(2);
         for _ in 0..k {
-            let z = 1.0 - 2.0 * rng.next_f32();
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = 2.0 * std::f32::consts::PI * rng.next_f32();
-            let d = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+            let d = uniform_direction(&mut rng);
             mc.add_sample(
                 d,
                 Vec3::splat(axis.dot(d).max(0.0)),
@@ -344,6 +353,39 @@ mod tests {
                 .sum();
             let got = mc.eval(d).x as f64;
             assert!((got - expect).abs() < 0.01, "at {d}: {got} vs {expect}");
+        }
+    }
+
+    /// The scaled basis is the basis convolved with the phase function:
+    /// for directions `n'` drawn from `P(n·n')` about `n`, the mean of
+    /// `Y_i(n')` is `g^l Y_i(n)` (Funk–Hecke), for every `i` of order 4, at
+    /// `g` 0.85 and −0.4.
+    #[test]
+    fn hg_convolved_basis_is_the_phase_functions_average() {
+        let n = Vec3::new(0.3, -0.5, 0.8).normalize();
+        let count = sh_count(4);
+        let mut rng = Rng::for_sample(21, 0, 0);
+        for g in [0.85f32, -0.4] {
+            let k = 200_000;
+            let mut mean = vec![0.0f64; count];
+            let mut y = [0.0f32; 25];
+            for _ in 0..k {
+                let d = crate::physics::phase::sample_hg(g, n, rng.next_f32(), rng.next_f32());
+                sh_basis(4, d, &mut y);
+                for (m, v) in mean.iter_mut().zip(&y) {
+                    *m += f64::from(*v) / k as f64;
+                }
+            }
+            let mut want = [0.0f32; 25];
+            sh_basis(4, n, &mut want);
+            hg_convolve_basis(&mut want[..count], g);
+            for (i, (m, w)) in mean.iter().zip(&want).enumerate() {
+                // Each |Y_i| ≤ 1.5 at order 4: the mean's sd is below 1.5/√k.
+                assert!(
+                    (m - f64::from(*w)).abs() < 0.015,
+                    "g {g}, index {i}: {m} vs {w}"
+                );
+            }
         }
     }
 }

@@ -17,6 +17,15 @@ use super::rng::Rng;
 use super::sh::sh_count;
 use super::volume::{DensityField, Optics, Volume};
 
+/// A direction drawn uniformly on the unit sphere (two draws of `rng`:
+/// the cosine, then the azimuth).
+pub(crate) fn uniform_direction(rng: &mut Rng) -> Vec3 {
+    let z = 1.0 - 2.0 * rng.next_f32();
+    let phi = 2.0 * std::f32::consts::PI * rng.next_f32();
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
 /// A homogeneous sphere of density 1 about the origin, its box its
 /// bounding cube.
 pub(crate) struct Ball {

@@ -90,7 +90,7 @@ use crate::physics::lights::Lights;
 use crate::physics::phase;
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::rng::Rng;
-use crate::physics::sh::{sh_basis, sh_count, MAX_COUNT, MAX_ORDER};
+use crate::physics::sh::{hg_convolve_basis, sh_basis, sh_count, MAX_COUNT, MAX_ORDER};
 use crate::physics::tracking::{transmittance, transmittance_at_rate};
 use crate::physics::volume::{DensityField, Volume};
 
@@ -528,10 +528,7 @@ impl LightSources {
             let coeffs = i * count..(i + 1) * count;
             self.view[i] = InternalLights::eval_sh(&self.scattered_coeffs[coeffs.clone()], &y);
             if phase {
-                // Index `l(l+1) + m` is band `l = ⌊√index⌋`.
-                for (index, yc) in y[..count].iter_mut().enumerate() {
-                    *yc *= g.powi((index as f32).sqrt().floor() as i32);
-                }
+                hg_convolve_basis(&mut y[..count], g);
                 self.phase_view[i] = InternalLights::eval_sh(&self.multi_coeffs[coeffs], &y);
             }
         }
@@ -1421,6 +1418,28 @@ mod tests {
     use super::*;
     use crate::physics::testing::*;
 
+    /// The view and phase walks' test scene: a sunlit cube (`σ_t` 1.5,
+    /// albedo 0.9, asymmetry `g`, the sun from the camera's side) seen from
+    /// `eye`, with 1024 lights placed by density, `walks` spread walks and
+    /// 1024 walks towards the eye each, order-4 harmonics.
+    fn sunlit_cube_seen(g: f32, walks: u32) -> (Volume<Cube>, Lights, Vec3, InternalParams) {
+        let vol = cube(1.5, 0.9, g);
+        let sun = one_sun(Vec3::new(0.3, -0.2, -1.0), Vec3::new(1.0, 2.0, 3.0));
+        let eye = Vec3::new(0.4, 0.3, 4.0);
+        let params = InternalParams {
+            lights: 1024,
+            walks,
+            sh_order: 4,
+            kernel_radius: None,
+            view_walks: 1024,
+            eye,
+            view_share: 0.0,
+            view_frame: Default::default(),
+            ..sh1_params(Clock::OpticalDepth, 0.5, 24, 0.3, L1Form::Field)
+        };
+        (vol, sun, eye, params)
+    }
+
     /// The walks towards the eye estimate what the lights' harmonics hold
     /// in that direction: over 1024 lights of a sunlit cube (`g` 0, so the
     /// order-4 series represents `J` closely), the mean of the view walks'
@@ -1433,20 +1452,7 @@ mod tests {
     fn view_walks_match_the_harmonics_towards_the_eye() {
         use crate::physics::sh::sh_basis;
         use std::sync::atomic::AtomicBool;
-        let vol = cube(1.5, 0.9, 0.0);
-        let sun = one_sun(Vec3::new(0.3, -0.2, -1.0), Vec3::new(1.0, 2.0, 3.0));
-        let eye = Vec3::new(0.4, 0.3, 4.0);
-        let params = InternalParams {
-            lights: 1024,
-            walks: 1024,
-            sh_order: 4,
-            kernel_radius: None,
-            view_walks: 1024,
-            eye,
-            view_share: 0.0,
-            view_frame: Default::default(),
-            ..sh1_params(Clock::OpticalDepth, 0.5, 24, 0.3, L1Form::Field)
-        };
+        let (vol, sun, eye, params) = sunlit_cube_seen(0.0, 1024);
         let cache = InternalLights::build(&vol, &sun, &params, &AtomicBool::new(false))
             .expect("not cancelled");
         assert!(cache.has_view());
@@ -1541,20 +1547,7 @@ mod tests {
         use crate::physics::sh::sh_basis;
         use std::sync::atomic::AtomicBool;
         let g = 0.75;
-        let vol = cube(1.5, 0.9, g);
-        let sun = one_sun(Vec3::new(0.3, -0.2, -1.0), Vec3::new(1.0, 2.0, 3.0));
-        let eye = Vec3::new(0.4, 0.3, 4.0);
-        let params = InternalParams {
-            lights: 1024,
-            walks: 64,
-            sh_order: 4,
-            kernel_radius: None,
-            view_walks: 1024,
-            eye,
-            view_share: 0.0,
-            view_frame: Default::default(),
-            ..sh1_params(Clock::OpticalDepth, 0.5, 24, 0.3, L1Form::Field)
-        };
+        let (vol, sun, eye, params) = sunlit_cube_seen(g, 64);
         assert_eq!(phase_walks(&params, g), 256);
         assert_eq!(phase_walks(&params, -g), 256);
         assert_eq!(phase_walks(&params, 0.7), 0);
@@ -1583,9 +1576,7 @@ mod tests {
             let v = cache.phase_view[i].element_sum() as f64;
             if !within {
                 sh_basis(4, n, &mut y);
-                for (index, yc) in y.iter_mut().enumerate() {
-                    *yc *= g.powi((index as f32).sqrt().floor() as i32);
-                }
+                hg_convolve_basis(&mut y, g);
                 let t = InternalLights::eval_sh(cache.multi_coefficients(i), &y).element_sum();
                 assert!(
                     (v as f32 - t).abs() <= 1e-5 * t.abs().max(1e-3),
@@ -1600,10 +1591,7 @@ mod tests {
             let walks = 1024;
             let mut sum = 0.0f64;
             for _ in 0..walks {
-                let z = 1.0 - 2.0 * rng.next_f32();
-                let phi = 2.0 * std::f32::consts::PI * rng.next_f32();
-                let r = (1.0 - z * z).max(0.0).sqrt();
-                let w = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+                let w = uniform_direction(&mut rng);
                 per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
                 walker.accumulate_j_from(x, w, 1, &mut rng, &mut per_walk, None);
                 let weight = 4.0 * std::f32::consts::PI * crate::physics::phase::hg(g, n.dot(w));
