@@ -412,12 +412,12 @@ fn gather(eye: vec3<f32>, dir: vec3<f32>, samples_in: u32, rng: ptr<function, Rn
     return out;
 }
 
-// The distance `r` from `origin` along `back` (the box left at `exit`) to
-// `L₁`'s source within `budget` of the clock, `1/pdf(r)` and the clock it
-// uses (`source_distance` in gather.rs): uniform up to where the budget or
-// the box ends (geometric clock), or where a clock drawn uniformly in
-// `[0, budget]` is reached, `pdf = rate / budget` (optical depth; past the
-// box's exit: not found, no source).
+// The distance `r` from `origin` along `back` to `L₁`'s source within
+// `budget` of the clock, `1/pdf(r)` and the clock it uses (`source_distance`
+// in gather.rs): uniform up to where the budget or the box ends (geometric
+// clock), or where a clock drawn uniformly in `[0, budget]` is reached,
+// `pdf = rate / budget` (optical depth). Not found where the line misses
+// the box or the clock is past its exit: no source.
 struct SourceDistance {
     found: bool,
     r: f32,
@@ -428,10 +428,14 @@ struct SourceDistance {
 fn source_distance(
     origin: vec3<f32>,
     back: vec3<f32>,
-    exit: f32,
     budget: f32,
     rng: ptr<function, Rng>,
 ) -> SourceDistance {
+    let bc = medium_clip(origin, back);
+    if !bc.hit {
+        return SourceDistance(false, 0.0, 0.0, 0.0);
+    }
+    let exit = bc.t1;
     let clock = gather_params.clock;
     if clock == CLOCK_GEOMETRIC {
         let r_max = min(budget, exit);
@@ -460,11 +464,7 @@ fn phase_view_l1(
     rng: ptr<function, Rng>,
 ) -> vec3<f32> {
     let back = -n;
-    let bc = medium_clip(y, back);
-    if !bc.hit {
-        return vec3<f32>(0.0);
-    }
-    let d = source_distance(y, back, bc.t1, budget, rng);
+    let d = source_distance(y, back, budget, rng);
     if !d.found {
         return vec3<f32>(0.0);
     }
@@ -526,11 +526,7 @@ fn field_l1_at(
         let u2 = rng_next_f32(rng);
         let travel = sample_hg(gather_params.g, towards, u1, u2);
         let back = -travel;
-        let bc = medium_clip(point, back);
-        if !bc.hit {
-            break;
-        }
-        let d = source_distance(point, back, bc.t1, budget, rng);
+        let d = source_distance(point, back, budget, rng);
         if !d.found {
             break;
         }

@@ -503,18 +503,10 @@ fn field_l1_at<D: DensityField>(
         }
         let travel = phase::sample_hg(cache.g, towards, rng.next_f32(), rng.next_f32());
         let back = -travel;
-        let Some((_, exit)) = vol.clip(point, back) else {
-            break;
-        };
-        // The source's distance ([`source_distance`]).
-        let Some((r, inv_pdf, used)) =
-            source_distance(vol, cache, (point, back, exit), budget, rng)
+        let Some((r, inv_pdf, used)) = source_distance(vol, cache, (point, back), budget, rng)
         else {
             break;
         };
-        if inv_pdf <= 0.0 {
-            break;
-        }
         let xp = point + back * r;
         let rho = vol.density.density(xp);
         let mut j = if phase_view {
@@ -545,26 +537,27 @@ fn field_l1_at<D: DensityField>(
     sum
 }
 
-/// The distance `r` from `from` along `back` (the box left at `exit`) to
-/// `L₁`'s source within `budget` of the clock, `1/pdf(r)` and the clock
-/// it uses: for the geometric clock uniform up to where the budget or the
-/// box ends; for the optical-depth clock where a clock drawn uniformly in
-/// `[0, budget]` is reached, `pdf = rate / budget`, so that the points
-/// follow the extinction the integrand carries (`J ∝ ρ`) and the march
-/// stops at the point instead of the budget's end. `None`: a clock past
-/// the box's exit, no source.
+/// The distance `r` from `from` along `back` to `L₁`'s source within
+/// `budget` of the clock, `1/pdf(r)` and the clock it uses: for the
+/// geometric clock uniform up to where the budget or the box ends; for the
+/// optical-depth clock where a clock drawn uniformly in `[0, budget]` is
+/// reached, `pdf = rate / budget`, so that the points follow the
+/// extinction the integrand carries (`J ∝ ρ`) and the march stops at the
+/// point instead of the budget's end. `None`: the line misses the box, or
+/// the clock is past its exit — no source.
 fn source_distance<D: DensityField>(
     vol: &Volume<D>,
     cache: &InternalLights,
-    (from, back, exit): (Vec3, Vec3, f32),
+    (from, back): (Vec3, Vec3),
     budget: f32,
     rng: &mut Rng,
 ) -> Option<(f32, f32, f32)> {
+    let (_, exit) = vol.clip(from, back)?;
     match cache.params.clock {
         Clock::Geometric => {
             let r_max = budget.min(exit);
             let r = rng.next_f32() * r_max;
-            Some((r, r_max, r))
+            (r_max > 0.0).then_some((r, r_max, r))
         }
         Clock::OpticalDepth => {
             let c = rng.next_f32() * budget;
@@ -576,7 +569,10 @@ fn source_distance<D: DensityField>(
                 t_exit: exit,
             };
             match march_clock_rate(vol, &ray, 0.0, exit, c) {
-                (ClockMarch::Reached(r), rate) if rate > 0.0 => Some((r, budget / rate, c)),
+                (ClockMarch::Reached(r), rate) if rate > 0.0 => {
+                    let inv_pdf = budget / rate;
+                    (inv_pdf > 0.0).then_some((r, inv_pdf, c))
+                }
                 _ => None,
             }
         }
@@ -606,15 +602,9 @@ fn phase_view_l1<D: DensityField>(
     rng: &mut Rng,
 ) -> Vec3 {
     let back = -towards;
-    let Some((_, exit)) = vol.clip(y, back) else {
+    let Some((r, inv_pdf, _)) = source_distance(vol, cache, (y, back), budget, rng) else {
         return Vec3::ZERO;
     };
-    let Some((r, inv_pdf, _)) = source_distance(vol, cache, (y, back, exit), budget, rng) else {
-        return Vec3::ZERO;
-    };
-    if inv_pdf <= 0.0 {
-        return Vec3::ZERO;
-    }
     let xp = y + back * r;
     let j = cache.reconstruct_phase_view(xp, vol.density.density(xp));
     if j == Vec3::ZERO {
