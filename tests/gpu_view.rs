@@ -8,8 +8,9 @@
 //!   the same sums on the CPU.
 //! - The worker (`session::worker`) on the GPU backend renders images whose
 //!   mean agrees with the CPU backend's (reference and internal lights,
-//!   within 4 standard errors of their difference), and a scene too large
-//!   for the device falls back to the CPU with a notice.
+//!   within 4 standard errors of their difference), a scene too large
+//!   for the device falls back to the CPU with a notice, and passes that
+//!   the driver cuts short (lavapipe's loop cap) are told once.
 //!
 //! Without an adapter the GPU cases print a notice and pass, unless
 //! `LANTERN_REQUIRE_GPU=1`.
@@ -198,7 +199,13 @@ fn statistics_pass_equals_the_cpu_sums() {
     let pixel = |i: usize| {
         let t = i as f32 / n as f32;
         GpuAccum {
-            mean: [t, 0.5 * t, 1.0 - t, 0.0],
+            // Some pixels with passes the driver cut short (`mean.w`).
+            mean: [
+                t,
+                0.5 * t,
+                1.0 - t,
+                (i % 7 == 3) as u32 as f32 * (1 + i % 3) as f32,
+            ],
             m2: [0.1 * t, 0.2, 0.3 * t * t, 0.0],
             single_mean: [0.0; 4],
         }
@@ -236,7 +243,13 @@ fn statistics_pass_equals_the_cpu_sums() {
         stats.mean_sq_diff,
         stats.second_mean,
     ];
-    println!("statistics: GPU {got:?}, CPU {expected:?}");
+    let cut: u64 = a.iter().map(|p| u64::from(p.cut_short_passes())).sum();
+    println!(
+        "statistics: GPU {got:?}, CPU {expected:?}; passes cut short: GPU {}, CPU {cut}",
+        stats.cut_short_passes
+    );
+    assert!(cut > 0, "the test needs passes cut short");
+    assert_eq!(stats.cut_short_passes, cut);
     for (g, e) in got.iter().zip(expected) {
         assert!(
             ((*g as f64) - e).abs() <= 1e-4 * e.abs().max(1e-3),
@@ -453,4 +466,61 @@ fn a_scene_too_large_for_the_device_falls_back_to_the_cpu_with_a_notice() {
     );
     assert_eq!(snapshot.backend, Backend::Cpu);
     assert!(errors.is_empty(), "{errors:?}");
+}
+
+/// The previewer tells the user when the GPU driver cuts the gather's
+/// passes short (the statistics pass counts them, `ImageStats`), once
+/// while the settings that cause it stay: the suite's thick cumulus with
+/// 32 points per ray and three window scatterings, which lavapipe's loop
+/// cap cuts (as `passes_cut_short_by_the_driver_are_reported` in
+/// `tests/gpu.rs` shows for `lantern render`); a hardware driver cuts
+/// nothing and nothing is said.
+#[test]
+fn the_previewer_tells_once_when_the_driver_cuts_passes_short() {
+    let Some(gpu) = common::gpu() else { return };
+    let llvmpipe = gpu.describe().contains("llvmpipe");
+    let (ctx, _turn) = gpu.into_parts();
+    let mut worker = Worker::start_with_gpu(Box::new(|_| {}), Some(ctx));
+    let heavy = |seed: u64| {
+        let mut job = job(
+            "assets/scenes/suite/thick_cumulus.ron",
+            16,
+            Method::Internal,
+            2,
+            seed,
+            Backend::Gpu,
+        );
+        let internal = &mut job.scene.render.internal;
+        internal.knobs.lights = 512;
+        internal.expert.walks = 4;
+        internal.expert.resample_every = 0;
+        internal.expert.light_samples = 32;
+        internal.expert.window_scatters = 3;
+        job
+    };
+    let told = |errors: &[String]| {
+        errors
+            .iter()
+            .filter(|e| e.contains("pixel passes short"))
+            .count()
+    };
+    let (snapshot, first) = render_with(&mut worker, heavy(3));
+    assert_eq!(snapshot.backend, Backend::Gpu);
+    let (_, second) = render_with(&mut worker, heavy(4));
+    println!("notices: {first:?} then {second:?}");
+    if llvmpipe {
+        assert_eq!(told(&first), 1, "{first:?}");
+        assert!(first.iter().any(|e| e.contains("render on the CPU")));
+    } else {
+        assert_eq!(
+            told(&first),
+            0,
+            "a hardware driver cut passes short: {first:?}"
+        );
+    }
+    assert_eq!(
+        told(&second),
+        0,
+        "told again for the same settings: {second:?}"
+    );
 }

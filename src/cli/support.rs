@@ -164,15 +164,11 @@ pub fn renewal_text(resample_every: u32, balanced: bool) -> String {
 /// ([`GpuImage::cut_short_walks`](crate::gpu::GpuImage::cut_short_walks)):
 /// those samples are too dark, and `--backend cpu` has no such limit.
 pub fn warn_cut_short(image: &crate::gpu::GpuImage) {
-    let cut = image.cut_short_passes();
-    if cut > 0 {
-        let all = u64::from(image.width) * u64::from(image.height) * u64::from(image.samples);
+    let all = u64::from(image.width) * u64::from(image.height) * u64::from(image.samples);
+    if let Some(text) = crate::gpu::cut_short_passes_text(image.cut_short_passes(), all) {
         eprintln!(
-            "warning: the GPU driver cut {cut} of {all} pixel passes short ({:.3} %): it caps the \
-             loop iterations of one shader invocation (Mesa's software driver does), so the \
-             image is darker than it should be; render with --backend cpu, or with fewer \
-             light samples or window scatterings",
-            100.0 * cut as f64 / all.max(1) as f64
+            "warning: {text}; render with --backend cpu, or with fewer light samples or window \
+             scatterings"
         );
     }
     if image.cut_short_walks > 0 {

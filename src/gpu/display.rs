@@ -84,6 +84,11 @@ pub struct ImageStats {
     pub mean_sq_diff: f32,
     /// Mean over pixels and channels of the second buffer's mean.
     pub second_mean: f32,
+    /// The first buffer's pixel passes that the driver's loop cap cut
+    /// short, summed over its pixels (what
+    /// [`GpuImage::cut_short_passes`](crate::gpu::GpuImage::cut_short_passes)
+    /// counts after a read-back).
+    pub cut_short_passes: u64,
 }
 
 impl ImageStats {
@@ -260,7 +265,7 @@ impl DisplayPass {
 
     /// The statistics of `a` (holding `samples` samples per pixel) and of
     /// its difference from `b` (`a` itself when `None`). Waits for the GPU
-    /// and reads 16 bytes back: for a worker thread, never a UI thread.
+    /// and reads 32 bytes back: for a worker thread, never a UI thread.
     pub fn stats(
         &self,
         a: &wgpu::Buffer,
@@ -277,7 +282,7 @@ impl DisplayPass {
         let params = Self::params(width, height, samples, &settings);
         let out = self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("display statistics"),
-            size: 16,
+            size: 32,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
@@ -313,6 +318,8 @@ impl DisplayPass {
             mean_variance: at(1),
             mean_sq_diff: at(2),
             second_mean: at(3),
+            // A sum of whole counts, exact in f32 up to 2²⁴.
+            cut_short_passes: at(4).max(0.0).round() as u64,
         })
     }
 }

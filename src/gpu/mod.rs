@@ -25,4 +25,4 @@ pub mod shaders;
 pub mod walks;
 
 pub use context::{GpuContext, GpuError};
-pub use renderer::{GpuImage, GpuRenderer};
+pub use renderer::{cut_short_passes_text, GpuImage, GpuRenderer};

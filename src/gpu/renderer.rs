@@ -336,6 +336,21 @@ impl GpuImage {
     }
 }
 
+/// What to tell the user when the driver cut `cut` of `all` pixel passes
+/// short ([`GpuImage::cut_short_passes`]; `None` when it cut none): the
+/// share and why the image is too dark, for the command line and the
+/// previewer alike, which each add how to avoid it.
+pub fn cut_short_passes_text(cut: u64, all: u64) -> Option<String> {
+    (cut > 0).then(|| {
+        format!(
+            "the GPU driver cut {cut} of {all} pixel passes short ({:.3} %): it caps the loop \
+             iterations of one shader invocation (Mesa's software driver does), so the image \
+             is darker than it should be",
+            100.0 * cut as f64 / all.max(1) as f64
+        )
+    })
+}
+
 /// A progressive GPU renderer for one prepared scene and one estimator.
 pub struct GpuRenderer {
     pub(crate) ctx: GpuContext,

@@ -588,6 +588,10 @@ struct GpuWorker {
     /// The density (and folder) of the last job the GPU could not take:
     /// later jobs on it go to the CPU without a new notice.
     failed_for: Option<(DensitySource, PathBuf)>,
+    /// Whether the user was told that the driver cuts passes short, since
+    /// the last job whose passes it did not cut: told once while the
+    /// settings that cause it stay, again if it comes back.
+    cut_told: std::cell::Cell<bool>,
 }
 
 fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>, gpu: Option<GpuContext>) {
@@ -604,6 +608,7 @@ fn worker_loop(rx: Receiver<Command>, shared: Arc<Shared>, gpu: Option<GpuContex
             ctx,
             stats,
             failed_for: None,
+            cut_told: std::cell::Cell::new(false),
         }),
         Err(e) => {
             push_error(
@@ -975,7 +980,8 @@ impl JobContext<'_> {
                 .iter()
                 .map(|p| LightSetStatus::of(p.last_set(), p.balanced()))
                 .collect();
-            let (streams, error_stats) = gpu_streams(gpu, &engines, &light_sets)?;
+            let (streams, error_stats, cut) = gpu_streams(gpu, &engines, &light_sets)?;
+            tell_cut_short(self.shared, &gpu.cut_told, cut);
             self.publish(streams, extra(pass + 1 == job.max_spp, error_stats));
             if let Some(c) = self.newer() {
                 return Ok(Some(c));
@@ -1024,8 +1030,30 @@ fn gpu_engines(
 }
 
 /// Streams rendered on the GPU, with the RMSE of internal lights against
-/// the reference and the reference's mean where both are there.
-type GpuStreams = (Vec<StreamImage>, Option<(f32, f32)>);
+/// the reference and the reference's mean where both are there, and the
+/// pixel passes that the driver cut short out of all (over the streams).
+type GpuStreams = (Vec<StreamImage>, Option<(f32, f32)>, (u64, u64));
+
+/// Tells the user once (`told`) that the GPU driver cut `cut.0` of
+/// `cut.1` pixel passes short (the image too dark: lavapipe's loop cap
+/// with heavy gather settings), and forgets it once a job's passes are
+/// whole again, so that it is told again if it comes back.
+fn tell_cut_short(shared: &Shared, told: &std::cell::Cell<bool>, (cut, all): (u64, u64)) {
+    match crate::gpu::cut_short_passes_text(cut, all) {
+        Some(text) if !told.get() => {
+            told.set(true);
+            push_error(
+                shared,
+                format!(
+                    "warning: {text}; render on the CPU, or with fewer light samples or window \
+                     scatterings (Expert)"
+                ),
+            );
+        }
+        Some(_) => {}
+        None => told.set(false),
+    }
+}
 
 /// The streams of GPU renderers whose passes have finished, with their
 /// noise figures (and, with both estimators, the RMSE of internal lights
@@ -1043,6 +1071,7 @@ fn gpu_streams(
         .map(|(_, r)| r.accum_buffer());
     let mut error_stats = None;
     let mut streams = Vec::new();
+    let mut cut = (0u64, 0u64);
     for (i, (estimator, engine)) in engines.iter().enumerate() {
         let (width, height) = engine.size();
         let other = match estimator {
@@ -1059,6 +1088,8 @@ fn gpu_streams(
         if other.is_some() {
             error_stats = Some((stats.rmse(), stats.second_mean));
         }
+        cut.0 += stats.cut_short_passes;
+        cut.1 += u64::from(width) * u64::from(height) * u64::from(engine.samples());
         streams.push(StreamImage {
             estimator: *estimator,
             width,
@@ -1075,7 +1106,7 @@ fn gpu_streams(
             light_sets: light_sets.get(i).copied().flatten(),
         });
     }
-    Ok((streams, error_stats))
+    Ok((streams, error_stats, cut))
 }
 
 /// What the low-resolution first look needs.
@@ -1168,7 +1199,7 @@ impl JobContext<'_> {
                 engine.add_pass(0);
             }
             gpu.ctx.wait_idle()?;
-            gpu_streams(gpu, &engines, &[]).map(|(streams, _)| streams)
+            gpu_streams(gpu, &engines, &[]).map(|(streams, _, _)| streams)
         });
         let streams = match gpu_streams {
             Some(Ok(mut streams)) => {
@@ -1290,6 +1321,36 @@ fn stream_image(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The driver's cut passes are told once while they last (a toast for
+    /// every pass of every job would bury the window), with their share
+    /// and what to do; a job whose passes are whole again re-arms it.
+    #[test]
+    fn cut_short_passes_are_told_once_while_they_last() {
+        let shared = Shared {
+            latest: Mutex::new(None),
+            errors: Mutex::new(Vec::new()),
+            wake: Box::new(|_| {}),
+        };
+        let told = std::cell::Cell::new(false);
+        let taken = |shared: &Shared| std::mem::take(&mut *shared.errors.lock().expect("errors"));
+        tell_cut_short(&shared, &told, (0, 4096));
+        assert!(taken(&shared).is_empty());
+        tell_cut_short(&shared, &told, (1024, 4096));
+        let said = taken(&shared);
+        assert_eq!(said.len(), 1, "{said:?}");
+        assert!(
+            said[0].contains("1024 of 4096 pixel passes short (25.000 %)")
+                && said[0].contains("render on the CPU"),
+            "{}",
+            said[0]
+        );
+        tell_cut_short(&shared, &told, (2048, 8192));
+        assert!(taken(&shared).is_empty(), "told twice");
+        tell_cut_short(&shared, &told, (0, 4096));
+        tell_cut_short(&shared, &told, (5, 4096));
+        assert_eq!(taken(&shared).len(), 1, "not told again when it came back");
+    }
 
     /// A preview within its budget keeps the settings' light samples; one
     /// over it takes them in proportion, never fewer than two (or than the
