@@ -588,8 +588,8 @@ struct GpuWorker {
     /// The density (and folder) of the last job the GPU could not take:
     /// later jobs on it go to the CPU without a new notice.
     failed_for: Option<(DensitySource, PathBuf)>,
-    /// Whether the user was told that the driver cuts passes short, since
-    /// the last job whose passes it did not cut: told once while the
+    /// Whether the user was told that the driver cuts passes short since
+    /// the last image published without a cut pass: told once while the
     /// settings that cause it stay, again if it comes back.
     cut_told: std::cell::Cell<bool>,
 }
@@ -980,9 +980,12 @@ impl JobContext<'_> {
                 .iter()
                 .map(|p| LightSetStatus::of(p.last_set(), p.balanced()))
                 .collect();
-            let (streams, error_stats, cut) = gpu_streams(gpu, &engines, &light_sets)?;
-            tell_cut_short(self.shared, &gpu.cut_told, cut);
-            self.publish(streams, extra(pass + 1 == job.max_spp, error_stats));
+            let rendered = gpu_streams(gpu, &engines, &light_sets)?;
+            tell_cut_short(self.shared, &gpu.cut_told, rendered.cut_short);
+            self.publish(
+                rendered.streams,
+                extra(pass + 1 == job.max_spp, rendered.error_stats),
+            );
             if let Some(c) = self.newer() {
                 return Ok(Some(c));
             }
@@ -1029,15 +1032,22 @@ fn gpu_engines(
         .collect()
 }
 
-/// Streams rendered on the GPU, with the RMSE of internal lights against
-/// the reference and the reference's mean where both are there, and the
-/// pixel passes that the driver cut short out of all (over the streams).
-type GpuStreams = (Vec<StreamImage>, Option<(f32, f32)>, (u64, u64));
+/// Streams rendered on the GPU and what the statistics pass said of them.
+struct GpuStreams {
+    /// One per engine.
+    streams: Vec<StreamImage>,
+    /// With both estimators: the RMSE of internal lights against the
+    /// reference, and the reference's mean.
+    error_stats: Option<(f32, f32)>,
+    /// Pixel passes that the driver cut short, and all pixel passes, over
+    /// the streams.
+    cut_short: (u64, u64),
+}
 
 /// Tells the user once (`told`) that the GPU driver cut `cut.0` of
 /// `cut.1` pixel passes short (the image too dark: lavapipe's loop cap
-/// with heavy gather settings), and forgets it once a job's passes are
-/// whole again, so that it is told again if it comes back.
+/// with heavy gather settings), and forgets it once an image comes with
+/// no pass cut, so that it is told again if it comes back.
 fn tell_cut_short(shared: &Shared, told: &std::cell::Cell<bool>, (cut, all): (u64, u64)) {
     match crate::gpu::cut_short_passes_text(cut, all) {
         Some(text) if !told.get() => {
@@ -1106,7 +1116,11 @@ fn gpu_streams(
             light_sets: light_sets.get(i).copied().flatten(),
         });
     }
-    Ok((streams, error_stats, cut))
+    Ok(GpuStreams {
+        streams,
+        error_stats,
+        cut_short: cut,
+    })
 }
 
 /// What the low-resolution first look needs.
@@ -1199,7 +1213,7 @@ impl JobContext<'_> {
                 engine.add_pass(0);
             }
             gpu.ctx.wait_idle()?;
-            gpu_streams(gpu, &engines, &[]).map(|(streams, _, _)| streams)
+            gpu_streams(gpu, &engines, &[]).map(|rendered| rendered.streams)
         });
         let streams = match gpu_streams {
             Some(Ok(mut streams)) => {
