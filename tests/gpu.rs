@@ -1391,6 +1391,154 @@ fn gpu_lit_case_with(
     );
 }
 
+/// A GPU build whose deadline has passed (a render with a time limit
+/// shorter than its first set's walks, as on lavapipe, where the thick
+/// cumulus's set takes 30 s) walks its first lights whole and every other
+/// light one walk of each kind, and estimates what a whole build
+/// estimates: over the 8192 lights of the thin sphere with `g` 0.5 and
+/// walks towards the eye, the means of the lights' `Σ J_k` (the
+/// harmonics' constant term), `F` and views agree with a whole build's
+/// within 4.5 standard errors, and the terms' energies within 5 %. It
+/// reports what it walked (one walk per light, well under a whole set's
+/// walks). Sums weighed by the whole build's counts instead of the
+/// dispatch's would be 16 times too small and fail every comparison.
+/// (The phase walks, where `g` ≥ 0.75, are weighed the same way as the
+/// views; with one walk per light their heavy tail makes a mean over the
+/// lights too noisy to test here.)
+#[test]
+fn gpu_build_stopped_at_its_deadline_keeps_the_mean() {
+    use lantern::physics::internal::sources::within_view_reach;
+    let Some(ctx) = common::gpu() else { return };
+    let prepared = common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
+        s.camera.width = 16;
+        s.camera.height = 16;
+        s.medium.g = 0.5;
+    });
+    let base = walk_params(&prepared, |p| {
+        (p.lights, p.walks, p.view_walks, p.terms, p.seed) = (8192, 16, 16, 64, 11);
+    });
+    let stopped = InternalParams {
+        seed: 12,
+        walk_deadline: Some(Instant::now()),
+        ..base
+    };
+    let build = |params: &InternalParams| {
+        build_internal_lights_gpu(&ctx, &prepared, params).unwrap_or_else(|e| panic!("{e:#}"))
+    };
+    let (full, early) = (build(&base), build(&stopped));
+    println!(
+        "whole build: {} walks, share {}; stopped: {} walks, share {:.3}",
+        full.walked, full.walk_share, early.walked, early.walk_share
+    );
+    assert_eq!((full.walked, full.walk_share), (16, 1.0));
+    assert_eq!(early.walked, 1);
+    assert!(early.walk_share < 0.25, "walked {}", early.walk_share);
+    let vol = &prepared.volume;
+    // Mean and standard error over the lights of one value per light.
+    let stats = |values: Vec<f64>| {
+        let m = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / m;
+        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (m - 1.0);
+        (mean, (var / m).sqrt())
+    };
+    let per_light = |c: &InternalLights, params: &InternalParams, part: &str| {
+        let reached = within_view_reach(vol, params, c.kernel_radius, &c.lights);
+        let value = |i: usize| -> Option<Vec3> {
+            match part {
+                "Σ J_k" => Some(c.multi_coefficients(i)[0]),
+                "F" => Some(c.f_coefficients(i)[0]),
+                _ => reached[i].then(|| c.view(i)).flatten(),
+            }
+        };
+        stats(
+            (0..c.len())
+                .filter_map(|i| value(i).map(|v| f64::from(v.element_sum())))
+                .collect(),
+        )
+    };
+    for part in ["Σ J_k", "F", "view"] {
+        let ((a, se_a), (b, se_b)) = (
+            per_light(&full, &base, part),
+            per_light(&early, &stopped, part),
+        );
+        let z = (b - a) / (se_a * se_a + se_b * se_b).sqrt();
+        println!("{part}: whole {a:.5} ± {se_a:.5}, stopped {b:.5} ± {se_b:.5}, z {z:.2}");
+        assert!(
+            z.abs() < 4.5,
+            "{part}: whole {a:.5}, stopped {b:.5}, z {z:.2}"
+        );
+        assert!(
+            se_b < 0.1 * a.abs(),
+            "{part}: too noisy to tell ({se_b} of {a})"
+        );
+    }
+    let energy = |c: &InternalLights| c.term_energy[1..].iter().sum::<Vec3>().element_sum();
+    let (a, b) = (energy(&full), energy(&early));
+    println!("terms' energy: whole {a:.5}, stopped {b:.5}");
+    assert!(
+        (b / a - 1.0).abs() < 0.05,
+        "terms' energy: whole {a}, stopped {b}"
+    );
+}
+
+/// `lantern render --backend gpu --time T`: the first light set's walks
+/// end near three quarters of `T`, as on the CPU. On lavapipe the thick
+/// cumulus's set of 1024 lights takes several seconds whole; with `--time
+/// 1` the command says what share of the set's walks it walked before
+/// the limit and writes it into the image's metadata
+/// (`lantern/first_set_walks`, `lantern/first_set_share`), where before
+/// this the render walked the whole set first. On a hardware adapter, whose set fits, it says
+/// neither.
+#[test]
+fn a_gpu_render_with_a_time_limit_walks_its_first_set_within_it() {
+    let Some(ctx) = common::gpu() else { return };
+    let llvmpipe = ctx.describe().contains("llvmpipe");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cumulus.exr");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let t = Instant::now();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_lantern"))
+        .current_dir(root)
+        .args(["render", "assets/scenes/suite/thick_cumulus.ron"])
+        .args(["--method", "internal", "--backend", "gpu", "--time", "1"])
+        .args(["--lights", "1024", "--seed", "5", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let secs = t.elapsed().as_secs_f64();
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    println!("{stdout}(the command took {secs:.1} s)");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let told = stdout.contains("walks before the time limit");
+    let meta = lantern::render::export::read_exr_metadata(&out).unwrap();
+    let stored = meta.iter().find(|(k, _)| k == "lantern/first_set_walks");
+    if llvmpipe {
+        assert!(told, "the walks' deadline went untold");
+        let walks: u32 = stored
+            .expect("no lantern/first_set_walks")
+            .1
+            .parse()
+            .unwrap();
+        assert!((1..16).contains(&walks), "first set's walks {walks}");
+        let share = meta.iter().find(|(k, _)| k == "lantern/first_set_share");
+        let share: f64 = share
+            .expect("no lantern/first_set_share")
+            .1
+            .parse()
+            .unwrap();
+        assert!(share > 0.0 && share < 1.0, "first set's share {share}");
+    } else {
+        assert!(
+            !told && stored.is_none(),
+            "a hardware GPU's set stopped early"
+        );
+    }
+}
+
 /// The placement's and the walks' uniforms match their WGSL structs.
 #[test]
 fn walk_mirrors_match_wgsl_layout() {

@@ -62,7 +62,7 @@ fn bench_gpu(
     let start = Instant::now();
     let mut settings = prepared.scene.render.clone();
     settings.seed = 0;
-    let (mut renderer, timings) = gpu_renderer(ctx, prepared, &settings)?;
+    let (mut renderer, lights) = gpu_renderer(ctx, prepared, &settings, None)?;
     renderer.finish()?;
     let build = start.elapsed().as_secs_f64();
     // One untimed pass: the first dispatch may still compile or page in.
@@ -83,7 +83,7 @@ fn bench_gpu(
     Ok((
         build,
         times[times.len() / 2],
-        timings.map(|t| t.placement + t.walks),
+        lights.map(|b| b.timings.placement + b.timings.walks),
     ))
 }
 

@@ -269,10 +269,10 @@ fn gpu_snapshots(
     balanced: bool,
 ) -> Result<Vec<Snapshot>> {
     let start = Instant::now();
-    let (mut renderer, timings) = gpu_renderer(ctx, prepared, settings)?;
+    let (mut renderer, build) = gpu_renderer(ctx, prepared, settings, None)?;
     renderer.finish()?;
     let mut elapsed = start.elapsed();
-    let set_secs = timings.map_or(elapsed.as_secs_f64(), |t| t.total());
+    let set_secs = build.map_or(elapsed.as_secs_f64(), |b| b.whole_set_secs());
     let mut passes = GpuPasses::new(&renderer, settings, balanced, set_secs);
     let mut out = Vec::new();
     for &target in times {
@@ -309,7 +309,7 @@ fn warm_up(ctx: &GpuContext, scene: &Path, size: u32) -> Result<()> {
     for method in [Method::Internal, Method::Reference] {
         let mut settings = prepared.scene.render.clone();
         settings.method = method;
-        let (mut renderer, _) = gpu_renderer(ctx, &prepared, &settings)?;
+        let (mut renderer, _) = gpu_renderer(ctx, &prepared, &settings, None)?;
         renderer.add_pass(0);
         renderer.finish()?;
     }

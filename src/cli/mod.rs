@@ -200,6 +200,8 @@ mod tests {
         .unwrap();
         let meta = read_exr_metadata(&out).unwrap();
         assert_eq!(meta_value(&meta, "lantern/first_set_walks"), "1");
+        // One round of the 16 (the walks towards the eye as many).
+        assert_eq!(meta_value(&meta, "lantern/first_set_share"), "0.0625");
         assert_eq!(meta_value(&meta, "lantern/spp"), "1");
         assert!(read_exr(&out).unwrap().pixels.iter().any(|v| v.x > 0.0));
     }

@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::args::{InternalArgs, TimedArgs};
-use super::support::{gpu_context, gpu_renderer, warn_cut_short};
+use super::support::{first_set_metadata, gpu_context, gpu_renderer, walks_text, warn_cut_short};
 use crate::cpu::{Passes, Renderer};
 use crate::render::export::{write_exr_with_metadata, write_image};
 use crate::render::film::image_mean;
@@ -100,8 +100,9 @@ impl StopRule {
 /// the spp reached, the seconds spent (the internal lights' build
 /// included), the method, the seed, the backend, the time limit if any,
 /// and for the internal-lights method its settings (RON) and resolved `s*`
-/// (`lantern render` adds `lantern/first_set_walks` where a time limit cut
-/// the first light set's walks short of the settings' `K`).
+/// (`lantern render` adds `lantern/first_set_walks` and
+/// `lantern/first_set_share` where a time limit cut the first light set's
+/// walks short: [`super::support::first_set_metadata`]).
 pub fn render_metadata(
     settings: &RenderSettings,
     spp: u32,
@@ -254,10 +255,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .context("internal-light build was cancelled")?;
     let build_secs = t_build.elapsed().as_secs_f64();
     if let Some(lights) = renderer.internal_lights() {
-        let walks = match (lights.walked, lights.params.walks) {
-            (done, k) if done < k => format!("{k} ({done} walked before the time limit)"),
-            (_, k) => k.to_string(),
-        };
+        let walks = walks_text(lights.walked, lights.params.walks, lights.walk_share);
         println!(
             "internal lights: M = {}, s* = {:.4}, N = {}, K = {walks}, h = {:.4}, clock {:?}: placed in {:.3} s, walked in {:.3} s",
             lights.len(),
@@ -309,11 +307,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         timed.time,
         s_star,
     );
-    if let Some(l) = renderer
-        .internal_lights()
-        .filter(|l| l.walked < l.params.walks)
-    {
-        meta.push(("lantern/first_set_walks".to_owned(), l.walked.to_string()));
+    if let Some(l) = renderer.internal_lights() {
+        meta.extend(first_set_metadata(l.walked, l.walk_share));
     }
     write_render(out, &film, exposure, view, &meta, timed.variance.as_deref())?;
     print_time_limit(timed, film.samples, spent);
@@ -481,12 +476,15 @@ fn render_gpu(
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let ctx = gpu_context()?;
     let t_build = Instant::now();
-    let (mut renderer, timings) = gpu_renderer(&ctx, prepared, settings)?;
+    let walk_deadline = timed
+        .time
+        .map(|t| t_build + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)));
+    let (mut renderer, build) = gpu_renderer(&ctx, prepared, settings, walk_deadline)?;
     renderer.finish()?;
     let build_secs = t_build.elapsed().as_secs_f64();
     // Set 0's own build time (without the pipelines' compilation), which
     // a balanced schedule weighs later sets' builds against.
-    let set_secs = timings.map_or(build_secs, |t| t.total());
+    let set_secs = build.map_or(build_secs, |b| b.whole_set_secs());
     let bar = pass_bar(rule);
     let start = Instant::now();
     let balanced = timed.time.is_some() && !timed.fixed_renewal;
@@ -524,7 +522,7 @@ fn render_gpu(
     let film = image.film();
     let s_star =
         (settings.method == Method::Internal).then(|| internal_params(prepared, settings).s_star);
-    let meta = render_metadata(
+    let mut meta = render_metadata(
         settings,
         film.samples,
         spent,
@@ -532,6 +530,9 @@ fn render_gpu(
         timed.time,
         s_star,
     );
+    if let Some(b) = build {
+        meta.extend(first_set_metadata(b.walked, b.walk_share));
+    }
     write_render(out, &film, exposure, view, &meta, timed.variance.as_deref())?;
     print_time_limit(timed, film.samples, spent);
     let mean = film.image_mean();

@@ -14,7 +14,7 @@ use glam::Vec3;
 use crate::cpu::Renderer;
 use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuRenderer};
-use crate::physics::internal::sources::BuildTimings;
+use crate::physics::internal::sources::{BuildTimings, InternalParams};
 use crate::render::{internal_params, Film, PreparedScene};
 use crate::scene::{Method, RenderSettings, Scene};
 
@@ -40,25 +40,81 @@ pub fn gpu_context() -> Result<GpuContext> {
     Ok(ctx)
 }
 
+/// What a GPU build of the internal lights tells its caller: its times,
+/// and the share of a whole set's walks it walked (less than one where it
+/// stopped at its deadline).
+#[derive(Clone, Copy, Debug)]
+pub struct GpuBuild {
+    /// The build's times.
+    pub timings: BuildTimings,
+    /// [`InternalLights::walk_share`](crate::physics::internal::sources::InternalLights::walk_share).
+    pub walk_share: f64,
+    /// [`InternalLights::walked`](crate::physics::internal::sources::InternalLights::walked).
+    pub walked: u32,
+}
+
+impl GpuBuild {
+    /// What a whole set's build would take: the time measured over the
+    /// share walked (what a balanced schedule weighs later sets by).
+    pub fn whole_set_secs(&self) -> f64 {
+        self.timings.total() / self.walk_share.max(f64::EPSILON)
+    }
+}
+
+/// `K` as the build messages print it: the walks per light, and where a
+/// build stopped at its deadline the share of the set's walks it walked
+/// and the fewest walks of any light.
+pub fn walks_text(walked: u32, walks: u32, share: f64) -> String {
+    if share < 1.0 {
+        format!(
+            "{walks} ({:.0} % of the set's walks before the time limit, at least {walked} per light)",
+            100.0 * share
+        )
+    } else {
+        walks.to_string()
+    }
+}
+
+/// The header's record of a first light set that a time limit cut short
+/// (`lantern/first_set_walks`: the fewest walks of any light;
+/// `lantern/first_set_share`: the share of the set's walks walked), none
+/// for a whole set.
+pub fn first_set_metadata(walked: u32, share: f64) -> Vec<(String, String)> {
+    if share < 1.0 {
+        vec![
+            ("lantern/first_set_walks".to_owned(), walked.to_string()),
+            ("lantern/first_set_share".to_owned(), format!("{share:.4}")),
+        ]
+    } else {
+        Vec::new()
+    }
+}
+
 /// The GPU renderer for `settings.method`; for the internal-lights method
 /// the lights are built on the GPU first (placement and walks, then the
-/// spatial indices on the CPU), and their build times come back too.
+/// spatial indices on the CPU), their walks ending near `walk_deadline`
+/// if one is given ([`InternalParams::walk_deadline`](crate::physics::internal::sources::InternalParams::walk_deadline)),
+/// and what the build took comes back too.
 pub fn gpu_renderer(
     ctx: &GpuContext,
     prepared: &PreparedScene,
     settings: &RenderSettings,
-) -> Result<(GpuRenderer, Option<BuildTimings>)> {
+    walk_deadline: Option<Instant>,
+) -> Result<(GpuRenderer, Option<GpuBuild>)> {
     match settings.method {
         Method::Reference => Ok((GpuRenderer::reference(ctx, prepared, settings.seed)?, None)),
         Method::Internal => {
-            let params = internal_params(prepared, settings);
+            let params = InternalParams {
+                walk_deadline,
+                ..internal_params(prepared, settings)
+            };
             let lights = build_internal_lights_gpu(ctx, prepared, &params)?;
             println!(
                 "internal lights (built on the GPU): M = {}, s* = {:.4}, N = {}, K = {}, clock {:?}: placed in {:.3} s, walked in {:.3} s (GPU), indexed in {:.3} s (CPU)",
                 lights.len(),
                 lights.s_star,
                 lights.params.terms,
-                lights.params.walks,
+                walks_text(lights.walked, lights.params.walks, lights.walk_share),
                 lights.params.clock,
                 lights.timings.placement,
                 lights.timings.walks,
@@ -71,7 +127,12 @@ pub fn gpu_renderer(
                 settings.internal.expert.light_samples,
                 settings.seed,
             )?;
-            Ok((renderer, Some(lights.timings)))
+            let build = GpuBuild {
+                timings: lights.timings,
+                walk_share: lights.walk_share,
+                walked: lights.walked,
+            };
+            Ok((renderer, Some(build)))
         }
     }
 }

@@ -278,17 +278,17 @@ impl Passes {
     /// schedule, which applies to the internal-lights method with renewed
     /// sets (`resample_every` > 0: it is the first sets' length);
     /// `build_secs` is what set 0 took to build (counted as a whole set's
-    /// build where its walks stopped early: scaled by the walks it did,
-    /// [`InternalLights::walked`](crate::physics::internal::sources::InternalLights::walked)).
+    /// build where its walks stopped early: scaled by the share it walked,
+    /// [`InternalLights::walk_share`](crate::physics::internal::sources::InternalLights::walk_share)).
     pub fn new(renderer: &Renderer, balanced: bool, build_secs: f64) -> Self {
         let s = renderer.settings();
         let every = s.internal.expert.resample_every;
         let balanced = (balanced && s.method == Method::Internal && every > 0).then(|| {
             let cam = &renderer.prepared().camera;
             let mut b = BalancedRenewal::new(cam.width as usize * cam.height as usize, every);
-            let whole = renderer.internal_lights().map_or(1.0, |l| {
-                f64::from(l.params.walks.max(1)) / f64::from(l.walked.max(1))
-            });
+            let whole = renderer
+                .internal_lights()
+                .map_or(1.0, |l| 1.0 / l.walk_share.max(f64::EPSILON));
             b.add_set_build(build_secs * whole);
             b
         });

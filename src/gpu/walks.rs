@@ -26,6 +26,12 @@
 //!   towards the eye turned by the phase function and add one more
 //!   (`L₁`'s source, [`InternalLights::reconstruct_phase_view`]).
 //!
+//!   With a deadline (`InternalParams::walk_deadline`: a render with a
+//!   time limit shorter than a whole set's walks) the lights are
+//!   dispatched in chunks, timed, and each chunk walks the share of the
+//!   walks that the time left allows (`walk_within`); each light's sums
+//!   are weighed by its own dispatch's counts, so the set stays unbiased.
+//!
 //! Positions, weights, SH coefficients, arriving light and term energies
 //! are read back (a few MiB) and the CPU's [`InternalLights::assemble`]
 //! builds the kernel radius and the spatial indices.
@@ -138,7 +144,7 @@ pub fn build_internal_lights_gpu(
     let t_place = start.elapsed().as_secs_f64();
 
     let start = Instant::now();
-    let (placed_raw, out) = walk(&build, prepared, params)?;
+    let (placed_raw, out, walked) = walk(&build, prepared, params)?;
     let t_walk = start.elapsed().as_secs_f64();
 
     let m = build.light_count as usize;
@@ -190,6 +196,8 @@ pub fn build_internal_lights_gpu(
     lights_out.timings.placement = t_place;
     lights_out.timings.walks = t_walk;
     lights_out.cut_short_walks = cut_short_walks;
+    lights_out.walked = walked.spread;
+    lights_out.walk_share = walked.share;
     Ok(lights_out)
 }
 
@@ -386,7 +394,7 @@ fn walk(
     build: &Build,
     prepared: &PreparedScene,
     params: &InternalParams,
-) -> Result<(Vec<Vec4>, Vec<Vec4>), GpuError> {
+) -> Result<(Vec<Vec4>, Vec<Vec4>, Walked), GpuError> {
     let ctx = &build.ctx;
     let order = params.sh_order.min(MAX_ORDER);
     let count = sh_count(order) as u32;
@@ -434,21 +442,248 @@ fn walk(
         );
         (params_buf, out, group)
     })?;
+    let full = WalkCounts {
+        spread: walks,
+        view: params.view_walks,
+        phase,
+    };
     // One dispatch per block of 64 walks and of at most MAX_GROUPS lights;
     // each adds its sums to `out` (zeroed at creation).
-    ctx.scoped("running the internal-light walks", || {
-        for walk_offset in (0..walks + params.view_walks + phase).step_by(WALK_LANES as usize) {
-            for light_offset in (0..build.light_count).step_by(MAX_GROUPS as usize) {
+    let mut run = |lights: std::ops::Range<u32>, counts: WalkCounts| {
+        walk_params.walks = counts.spread;
+        walk_params.view_walks = counts.view;
+        walk_params.phase_walks = counts.phase;
+        for walk_offset in (0..counts.total()).step_by(WALK_LANES as usize) {
+            for light_offset in lights.clone().step_by(MAX_GROUPS as usize) {
                 walk_params.walk_offset = walk_offset;
                 walk_params.light_offset = light_offset;
                 ctx.queue
                     .write_buffer(&params_buf, 0, bytemuck::bytes_of(&walk_params));
-                let groups = (build.light_count - light_offset).min(MAX_GROUPS);
+                let groups = (lights.end - light_offset).min(MAX_GROUPS);
                 dispatch(ctx, "walks", &pipeline, &group, groups);
             }
         }
-    })?;
+    };
+    let walked = match params.walk_deadline {
+        None => {
+            ctx.scoped("running the internal-light walks", || {
+                run(0..build.light_count, full)
+            })?;
+            Walked {
+                spread: full.spread,
+                share: 1.0,
+            }
+        }
+        Some(deadline) => walk_within(ctx, build.light_count, full, deadline, |lights, counts| {
+            ctx.scoped("running the internal-light walks", || run(lights, counts))
+        })?,
+    };
     let placed = read_buffer(ctx, &build.placed, "the placed lights")?;
     let records = read_buffer(ctx, &out, "the internal-light walk results")?;
-    Ok((placed, records))
+    Ok((placed, records, walked))
+}
+
+/// Walks of each kind per light in one dispatch: spread (the harmonics,
+/// `F`, the energies), towards the eye, phase-turned. The shader weighs
+/// each light's sums by its dispatch's counts (`4π/K`, `1/K_v`, `1/K_p`),
+/// so lights walked with fewer are unbiased, only noisier.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct WalkCounts {
+    spread: u32,
+    view: u32,
+    phase: u32,
+}
+
+impl WalkCounts {
+    /// Walks per light in all.
+    fn total(self) -> u32 {
+        self.spread + self.view + self.phase
+    }
+
+    /// These counts scaled by `share` (`0 ..= 1`), rounded, each kind
+    /// keeping at least one walk where it has any: the records keep their
+    /// layout and every light its estimates.
+    fn scaled(self, share: f64) -> Self {
+        let scale = |k: u32| {
+            if k == 0 {
+                0
+            } else {
+                ((f64::from(k) * share).round() as u32).clamp(1, k)
+            }
+        };
+        Self {
+            spread: scale(self.spread),
+            view: scale(self.view),
+            phase: scale(self.phase),
+        }
+    }
+}
+
+/// What a build walked: the fewest spread walks of any light, and the
+/// share of a whole set's walks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Walked {
+    spread: u32,
+    share: f64,
+}
+
+/// Lights in each of the first two dispatches of a build with a deadline,
+/// as a share of the set (at least [`WALK_LANES`] lights): their times
+/// tell what the rest may walk.
+const DEADLINE_FIRST_SHARE: u32 = 64;
+
+/// Dispatches over which the rest of a build with a deadline is spread.
+const DEADLINE_CHUNKS: u32 = 16;
+
+/// A dispatch's seconds per light against its walks per light, fitted as
+/// `f + w · walks` over the dispatches timed so far (least squares,
+/// weighted by their lights): a light costs more than its walks (its
+/// arriving light, the workgroup's sums over the terms; on lavapipe about
+/// a fifth of a thick cumulus's whole set).
+#[derive(Default)]
+struct LightCost {
+    /// Σ n, Σ n x, Σ n y, Σ n x², Σ n x y over the dispatches (`n` lights,
+    /// `x` walks per light, `y` seconds per light).
+    sums: [f64; 5],
+}
+
+impl LightCost {
+    fn add(&mut self, lights: u32, walks: u32, secs: f64) {
+        let (n, x) = (f64::from(lights), f64::from(walks));
+        let y = secs / n.max(1.0);
+        for (s, v) in self
+            .sums
+            .iter_mut()
+            .zip([n, n * x, n * y, n * x * x, n * x * y])
+        {
+            *s += v;
+        }
+    }
+
+    /// `(f, w)`: seconds per light and per walk; with one kind of dispatch
+    /// so far, all of it per walk.
+    fn fit(&self) -> (f64, f64) {
+        let [n, sx, sy, sxx, sxy] = self.sums;
+        let det = n * sxx - sx * sx;
+        if n > 0.0 && det > 1e-9 * n * sxx {
+            let w = ((n * sxy - sx * sy) / det).max(0.0);
+            let f = ((sy - w * sx) / n).max(0.0);
+            (f, w)
+        } else {
+            (0.0, sy / sx.max(f64::MIN_POSITIVE))
+        }
+    }
+}
+
+/// The walks of `lights` lights with `full` counts, as `run(range,
+/// counts)` dispatches them, to end near `deadline`
+/// ([`InternalParams::walk_deadline`]: a render with a time limit shorter
+/// than a whole set's walks, as on a software driver, where the thick
+/// cumulus's set takes 30 s). The first lights walk whole and are timed;
+/// where the rest would not end in time whole, the next as many walk one
+/// of each kind, and from the two a cost per light and per walk
+/// ([`LightCost`]) tells each later dispatch's share of `full`, at least
+/// one walk of each kind per light. The CPU stops its rounds at the
+/// deadline instead (every light then has the same walks); here a
+/// dispatch's lights share its counts, and each light's sums are weighed
+/// by its own. A set cannot take less than its lights' own cost: on
+/// lavapipe the cumulus's 4096 lights take about 6 s however few walks.
+fn walk_within(
+    ctx: &GpuContext,
+    lights: u32,
+    full: WalkCounts,
+    deadline: Instant,
+    mut run: impl FnMut(std::ops::Range<u32>, WalkCounts) -> Result<(), GpuError>,
+) -> Result<Walked, GpuError> {
+    let first = (lights / DEADLINE_FIRST_SHARE).max(WALK_LANES);
+    let chunk = (lights / DEADLINE_CHUNKS).max(WALK_LANES);
+    let least = full.scaled(0.0);
+    let mut cost = LightCost::default();
+    let mut start = 0u32;
+    let mut walked_walks = 0u64;
+    let mut fewest = full.spread;
+    let mut dispatches = 0u32;
+    while start < lights {
+        let left = deadline
+            .saturating_duration_since(Instant::now())
+            .as_secs_f64();
+        let remaining = f64::from(lights - start);
+        let (f, w) = cost.fit();
+        let (counts, size) = match dispatches {
+            0 => (full, first),
+            // Whole from here on fits: no need to know more.
+            _ if remaining * (f + w * f64::from(full.total())) <= left => (full, chunk),
+            1 => (least, first),
+            _ => {
+                // The most walks per light the time left allows.
+                let walks = (left / remaining - f) / w.max(f64::MIN_POSITIVE);
+                (full.scaled(walks / f64::from(full.total())), chunk)
+            }
+        };
+        let end = (start + size).min(lights);
+        let t = Instant::now();
+        run(start..end, counts)?;
+        ctx.wait_idle()?;
+        let secs = t.elapsed().as_secs_f64();
+        cost.add(end - start, counts.total(), secs);
+        walked_walks += u64::from(end - start) * u64::from(counts.total());
+        fewest = fewest.min(counts.spread);
+        start = end;
+        dispatches += 1;
+    }
+    let whole = u64::from(lights) * u64::from(full.total());
+    Ok(Walked {
+        spread: fewest,
+        share: if whole == 0 {
+            1.0
+        } else {
+            walked_walks as f64 / whole as f64
+        },
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Scaled counts keep one walk of each kind a light has, and no walk
+    /// of a kind it has none of; a share of one is the whole.
+    #[test]
+    fn scaled_counts_keep_each_kind() {
+        let full = WalkCounts {
+            spread: 16,
+            view: 16,
+            phase: 0,
+        };
+        assert_eq!(full.scaled(1.0), full);
+        assert_eq!(full.scaled(2.0), full);
+        let half = full.scaled(0.5);
+        assert_eq!((half.spread, half.view, half.phase), (8, 8, 0));
+        for share in [0.0, -3.0, f64::NAN, 0.01] {
+            let least = full.scaled(share);
+            assert_eq!(
+                (least.spread, least.view, least.phase),
+                (1, 1, 0),
+                "{share}"
+            );
+        }
+    }
+
+    /// The cost fit recovers a cost per light and per walk from dispatches
+    /// of two sizes of walks, and puts all of it on the walks while it has
+    /// seen one size only.
+    #[test]
+    fn light_cost_fits_per_light_and_per_walk() {
+        let (f, w) = (1.0e-3, 0.15e-3);
+        let secs = |lights: u32, walks: u32| f64::from(lights) * (f + w * f64::from(walks));
+        let mut cost = LightCost::default();
+        cost.add(64, 36, secs(64, 36));
+        let (f0, w0) = cost.fit();
+        assert_eq!(f0, 0.0);
+        assert!((w0 * 36.0 - (f + 36.0 * w)).abs() < 1e-12);
+        cost.add(64, 3, secs(64, 3));
+        cost.add(256, 7, secs(256, 7));
+        let (f1, w1) = cost.fit();
+        assert!((f1 - f).abs() < 1e-9 && (w1 - w).abs() < 1e-9, "{f1} {w1}");
+    }
 }

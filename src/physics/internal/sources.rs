@@ -178,12 +178,14 @@ pub struct InternalParams {
     pub view_share: f32,
     /// The camera, for `view_share` (the default frame when unused).
     pub view_frame: ViewFrame,
-    /// When the CPU's walks stop early (`None`: never): after the round
-    /// of walks (one per light) that ends past it, at least one. A
-    /// render with a time limit shorter than a full set's walks gets its
-    /// first image in time from fewer walks per light, each weighted by
-    /// the walks done (unbiased, noisier). A matter of scheduling, not of
-    /// the estimator: the GPU's walks ignore it.
+    /// When the walks stop early (`None`: never): on the CPU after the
+    /// round of walks (one per light) that ends past it, at least one; on
+    /// the GPU each dispatch of lights walks the share that the time left
+    /// allows, at least one walk of each kind per light
+    /// ([`crate::gpu::walks`]). A render with a time limit shorter than a
+    /// full set's walks gets its first image in time from fewer walks per
+    /// light, each weighted by the walks done (unbiased, noisier). A
+    /// matter of scheduling, not of the estimator.
     pub walk_deadline: Option<Instant>,
 }
 
@@ -364,8 +366,14 @@ pub struct InternalLights {
     pub cut_short_walks: u64,
     /// Walks per light walked: `params.walks`, or fewer where the build
     /// stopped at [`InternalParams::walk_deadline`] (its sums then weigh
-    /// each walk `4π` over the walks done).
+    /// each walk `4π` over the walks done; on the GPU, the fewest any
+    /// light walked).
     pub walked: u32,
+    /// The share of a whole set's walks that the build walked: 1, or less
+    /// where it stopped at [`InternalParams::walk_deadline`]. A schedule
+    /// that measured the build's time divides it by this to tell what a
+    /// whole set costs.
+    pub walk_share: f64,
     pub(crate) sh_order: u32,
     pub(crate) sh_count: usize,
     /// `F_i` SH coefficients, `sh_count` per light.
@@ -969,6 +977,7 @@ impl InternalLights {
         let mut out = Self::assemble(vol, external, params, sources, density_integral);
         out.timings.walks = t_walk;
         out.walked = lattice_done;
+        out.walk_share = f64::from(rounds.min(total_rounds)) / f64::from(total_rounds.max(1));
         Some(out)
     }
 
@@ -1084,6 +1093,7 @@ impl InternalLights {
             timings: BuildTimings::default(),
             cut_short_walks: 0,
             walked: params.walks.max(1),
+            walk_share: 1.0,
             sh_order: order,
             sh_count: count,
             f_coeffs,
