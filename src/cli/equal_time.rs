@@ -15,10 +15,10 @@
 //! most one pass more); the reference renders once, its image taken at
 //! the end of its first pass at or past the time each of those took (its
 //! passes last milliseconds): both have run the same wall time, however
-//! long an internal-lights pass is. On the GPU (`--backend gpu`, whose
-//! sets are walked whole) the internal lights render once too, each
-//! time's snapshot on the way, the set in hand run on near each. Each
-//! image is compared with the converged one:
+//! long an internal-lights pass is. On the GPU (`--backend gpu`) the same:
+//! a render of its own to each time, its first set's walks cut short on
+//! the device where a whole set would not fit. Each image is compared
+//! with the converged one:
 //!
 //! - the error of the image mean per channel, `mean(a)/mean(c) − 1`, signed
 //!   (the converged mean's own standard error, printed above each table,
@@ -255,10 +255,9 @@ fn report_set(label: &str, set: u32, balanced: Option<&BalancedRenewal>) {
     }
 }
 
-/// [`snapshots`] on the GPU: the same schedule of light sets (fixed or
-/// balanced, [`GpuPasses`]), the passes accumulated on the device and read
-/// back at each of `times`; the time counted is the build (pipelines
-/// included) and the passes, not the read-backs.
+/// [`snapshots`] on the GPU: for the internal lights a render of its own
+/// to each time, as on the CPU, for the reference one render with a
+/// snapshot at each ([`gpu_render_to`]).
 fn gpu_snapshots(
     ctx: &GpuContext,
     prepared: &PreparedScene,
@@ -268,8 +267,43 @@ fn gpu_snapshots(
     label: &str,
     balanced: bool,
 ) -> Result<Vec<Snapshot>> {
+    if settings.method == Method::Internal {
+        let mut out = Vec::with_capacity(times.len());
+        for &t in times {
+            out.extend(gpu_render_to(
+                ctx,
+                prepared,
+                settings,
+                &[t],
+                truth,
+                label,
+                balanced,
+            )?);
+        }
+        return Ok(out);
+    }
+    gpu_render_to(ctx, prepared, settings, times, truth, label, balanced)
+}
+
+/// [`render_to`] on the GPU: the same schedule of light sets (fixed or
+/// balanced, [`GpuPasses`]), set 0's walks ending near three quarters of
+/// the first time as on the CPU, the passes accumulated on the device and
+/// read back at each of `times`; the time counted is the build (pipelines
+/// included) and the passes, not the read-backs.
+fn gpu_render_to(
+    ctx: &GpuContext,
+    prepared: &PreparedScene,
+    settings: &RenderSettings,
+    times: &[f64],
+    truth: &Truth<'_>,
+    label: &str,
+    balanced: bool,
+) -> Result<Vec<Snapshot>> {
     let start = Instant::now();
-    let (mut renderer, build) = gpu_renderer(ctx, prepared, settings, None)?;
+    let walk_deadline = times
+        .first()
+        .map(|&t| start + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)));
+    let (mut renderer, build) = gpu_renderer(ctx, prepared, settings, walk_deadline)?;
     renderer.finish()?;
     let mut elapsed = start.elapsed();
     let set_secs = build.map_or(elapsed.as_secs_f64(), |b| b.whole_set_secs());
