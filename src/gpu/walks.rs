@@ -580,8 +580,9 @@ impl LightCost {
 /// ([`InternalParams::walk_deadline`]: a render with a time limit shorter
 /// than a whole set's walks, as on a software driver, where the thick
 /// cumulus's set takes 30 s). The first lights walk whole and are timed;
-/// where the rest would not end in time whole, the next as many walk one
-/// of each kind, and from the two a cost per light and per walk
+/// where the rest would end in time whole they walk so, in one dispatch;
+/// otherwise the next as many walk one of each kind, and from the two a
+/// cost per light and per walk
 /// ([`LightCost`]) tells each later dispatch's share of `full`, at least
 /// one walk of each kind per light. The CPU stops its rounds at the
 /// deadline instead (every light then has the same walks); here a
@@ -611,8 +612,11 @@ fn walk_within(
         let (f, w) = cost.fit();
         let (counts, size) = match dispatches {
             0 => (full, first),
-            // Whole from here on fits: no need to know more.
-            _ if remaining * (f + w * f64::from(full.total())) <= left => (full, chunk),
+            // Whole from here on fits: the rest in one go, as without a
+            // deadline. (A hardware GPU, which a small dispatch leaves
+            // mostly idle, takes about as long for all the lights as for
+            // the first few: there chunks would only add waits.)
+            _ if remaining * (f + w * f64::from(full.total())) <= left => (full, lights - start),
             1 => (least, first),
             _ => {
                 // The most walks per light the time left allows.
