@@ -51,7 +51,7 @@ use crate::cpu::{Passes, Renderer};
 use crate::gpu::GpuContext;
 use crate::render::export::{read_exr, read_exr_metadata, RgbImage};
 use crate::render::film::image_mean;
-use crate::render::renewal::{BalancedRenewal, FIRST_SET_SHARE};
+use crate::render::renewal::{first_set_deadline, BalancedRenewal};
 use crate::render::stats::{block_rmse_against, compare, rmse_against, BLOCK};
 use crate::render::{Film, PreparedScene};
 use crate::scene::{Method, RenderSettings};
@@ -180,23 +180,22 @@ impl Truth<'_> {
 
 /// Measures the image at each of `times` (ascending), as the module says:
 /// for the internal lights a render of its own to each time, for the
-/// reference one render with a snapshot at each.
+/// reference one render with a snapshot at each; `render_to` renders to
+/// the times it is given ([`render_to`] on the CPU, [`gpu_render_to`] on
+/// the GPU).
 fn snapshots(
-    prepared: &Arc<PreparedScene>,
-    settings: &RenderSettings,
+    method: Method,
     times: &[f64],
-    truth: &Truth<'_>,
-    label: &str,
-    balanced: bool,
+    mut render_to: impl FnMut(&[f64]) -> Result<Vec<Snapshot>>,
 ) -> Result<Vec<Snapshot>> {
-    if settings.method == Method::Internal {
+    if method == Method::Internal {
         let mut out = Vec::with_capacity(times.len());
         for &t in times {
-            out.extend(render_to(prepared, settings, &[t], truth, label, balanced)?);
+            out.extend(render_to(&[t])?);
         }
         return Ok(out);
     }
-    render_to(prepared, settings, times, truth, label, balanced)
+    render_to(times)
 }
 
 /// Renders progressively with `settings` to the last of `times`
@@ -215,9 +214,7 @@ fn render_to(
     let start = Instant::now();
     // As `lantern render --time` with the first time as its limit: set 0's
     // walks stop where a whole set would leave no time for its passes.
-    let walk_deadline = times
-        .first()
-        .map(|&t| start + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)));
+    let walk_deadline = first_set_deadline(start, times.first().copied());
     let renderer = Renderer::new_within(prepared.clone(), settings, &never, walk_deadline)
         .context("render was cancelled")?;
     let mut elapsed = start.elapsed();
@@ -255,36 +252,6 @@ fn report_set(label: &str, set: u32, balanced: Option<&BalancedRenewal>) {
     }
 }
 
-/// [`snapshots`] on the GPU: for the internal lights a render of its own
-/// to each time, as on the CPU, for the reference one render with a
-/// snapshot at each ([`gpu_render_to`]).
-fn gpu_snapshots(
-    ctx: &GpuContext,
-    prepared: &PreparedScene,
-    settings: &RenderSettings,
-    times: &[f64],
-    truth: &Truth<'_>,
-    label: &str,
-    balanced: bool,
-) -> Result<Vec<Snapshot>> {
-    if settings.method == Method::Internal {
-        let mut out = Vec::with_capacity(times.len());
-        for &t in times {
-            out.extend(gpu_render_to(
-                ctx,
-                prepared,
-                settings,
-                &[t],
-                truth,
-                label,
-                balanced,
-            )?);
-        }
-        return Ok(out);
-    }
-    gpu_render_to(ctx, prepared, settings, times, truth, label, balanced)
-}
-
 /// [`render_to`] on the GPU: the same schedule of light sets (fixed or
 /// balanced, [`GpuPasses`]), set 0's walks ending near three quarters of
 /// the first time as on the CPU, the passes accumulated on the device and
@@ -300,9 +267,7 @@ fn gpu_render_to(
     balanced: bool,
 ) -> Result<Vec<Snapshot>> {
     let start = Instant::now();
-    let walk_deadline = times
-        .first()
-        .map(|&t| start + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)));
+    let walk_deadline = first_set_deadline(start, times.first().copied());
     let (mut renderer, build) = gpu_renderer(ctx, prepared, settings, walk_deadline)?;
     renderer.finish()?;
     let mut elapsed = start.elapsed();
@@ -516,8 +481,12 @@ fn scene_report(
         height: h as usize,
     };
     let measure = |settings: &RenderSettings, times: &[f64], label: String| match ctx {
-        None => snapshots(&prepared, settings, times, &truth, &label, balanced),
-        Some(ctx) => gpu_snapshots(ctx, &prepared, settings, times, &truth, &label, balanced),
+        None => snapshots(settings.method, times, |times| {
+            render_to(&prepared, settings, times, &truth, &label, balanced)
+        }),
+        Some(ctx) => snapshots(settings.method, times, |times| {
+            gpu_render_to(ctx, &prepared, settings, times, &truth, &label, balanced)
+        }),
     };
     let internal_snapshots = measure(&internal, times, format!("{stem} internal"))?;
     let spent: Vec<f64> = internal_snapshots.iter().map(|s| s.secs).collect();

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -16,7 +16,7 @@ use super::support::{first_set_metadata, gpu_context, gpu_renderer, walks_text, 
 use crate::cpu::{Passes, Renderer};
 use crate::render::export::{write_exr_with_metadata, write_image};
 use crate::render::film::image_mean;
-use crate::render::renewal::{BalancedRenewal, FIRST_SET_SHARE};
+use crate::render::renewal::{first_set_deadline, BalancedRenewal};
 use crate::render::tonemap::ViewTransform;
 use crate::render::{internal_params, Film, PreparedScene};
 use crate::scene::{Method, RenderSettings, Scene};
@@ -248,9 +248,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let never = AtomicBool::new(false);
     // With a time limit, set 0's walks stop early where a whole set would
     // leave no time for its passes.
-    let walk_deadline = timed
-        .time
-        .map(|t| t_build + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)));
+    let walk_deadline = first_set_deadline(t_build, timed.time);
     let renderer = Renderer::new_within(prepared.clone(), &settings, &never, walk_deadline)
         .context("internal-light build was cancelled")?;
     let build_secs = t_build.elapsed().as_secs_f64();
@@ -476,9 +474,7 @@ fn render_gpu(
     let (w, h) = (prepared.camera.width, prepared.camera.height);
     let ctx = gpu_context()?;
     let t_build = Instant::now();
-    let walk_deadline = timed
-        .time
-        .map(|t| t_build + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)));
+    let walk_deadline = first_set_deadline(t_build, timed.time);
     let (mut renderer, build) = gpu_renderer(&ctx, prepared, settings, walk_deadline)?;
     renderer.finish()?;
     let build_secs = t_build.elapsed().as_secs_f64();

@@ -57,7 +57,7 @@ impl GpuBuild {
     /// What a whole set's build would take: the time measured over the
     /// share walked (what a balanced schedule weighs later sets by).
     pub fn whole_set_secs(&self) -> f64 {
-        self.timings.total() / self.walk_share.max(f64::EPSILON)
+        crate::render::renewal::whole_set_secs(self.timings.total(), self.walk_share)
     }
 }
 

@@ -21,7 +21,7 @@ use crate::physics::internal::gather::gather;
 use crate::physics::internal::sources::{InternalLights, InternalParams};
 use crate::physics::reference::radiance_split;
 use crate::physics::rng::{pixel_jitter, Rng};
-use crate::render::renewal::BalancedRenewal;
+use crate::render::renewal::{whole_set_secs, BalancedRenewal};
 use crate::render::{internal_params, internal_params_for_set, light_set, Film, PreparedScene};
 use crate::scene::{CameraFrame, Method, RenderSettings};
 
@@ -286,10 +286,8 @@ impl Passes {
         let balanced = (balanced && s.method == Method::Internal && every > 0).then(|| {
             let cam = &renderer.prepared().camera;
             let mut b = BalancedRenewal::new(cam.width as usize * cam.height as usize, every);
-            let whole = renderer
-                .internal_lights()
-                .map_or(1.0, |l| 1.0 / l.walk_share.max(f64::EPSILON));
-            b.add_set_build(build_secs * whole);
+            let share = renderer.internal_lights().map_or(1.0, |l| l.walk_share);
+            b.add_set_build(whole_set_secs(build_secs, share));
             b
         });
         Self {

@@ -22,6 +22,8 @@
 //! for renders that stop at a time limit (which do anyway); a render of a
 //! fixed sample count keeps the fixed `resample_every` and reproduces.
 
+use std::time::{Duration, Instant};
+
 use glam::Vec3;
 
 use crate::physics::internal::sources::{
@@ -51,6 +53,21 @@ pub const MIN_SET_SHARE: f64 = 0.1;
 /// of the time for its first passes. The set's noise dominates such
 /// media, so most of the time goes to it.
 pub const FIRST_SET_SHARE: f64 = 0.75;
+
+/// When the first light set's walks of a render that started at `start`
+/// with a time limit of `limit` seconds stop: [`FIRST_SET_SHARE`] of the
+/// limit later (`None` without a limit).
+pub fn first_set_deadline(start: Instant, limit: Option<f64>) -> Option<Instant> {
+    limit.map(|t| start + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)))
+}
+
+/// What a whole light set's build takes, from `secs` measured for a
+/// build that walked `share` of its walks
+/// ([`InternalLights::walk_share`](crate::physics::internal::sources::InternalLights::walk_share)):
+/// what a balanced schedule weighs later sets by.
+pub fn whole_set_secs(secs: f64, share: f64) -> f64 {
+    secs / share.max(f64::EPSILON)
+}
 
 /// Sets that must be complete before the period is balanced.
 const SETS_BEFORE_BALANCING: u32 = 3;
