@@ -330,3 +330,76 @@ fn timed_renders_shrink_the_kernel_slowly_where_the_sets_are_noisy() {
     assert_eq!(&wispy[..4], &[64, 32, 21, 16], "{wispy:?}");
     assert!(wispy[4..].iter().all(|&k| k == 16), "{wispy:?}");
 }
+
+/// A later set built with a walk deadline (what a balanced schedule plans
+/// for a set begun near a render's time limit,
+/// `BalancedRenewal::fresh_set_share`) walks part of its walks, says what
+/// share it walked (the schedule times it as a whole set's build from
+/// that), and renders: here a deadline already past stops it after its
+/// first round, 1 walk of 16. The mean of such a set is tested where it is
+/// built (`a_build_stopped_at_its_deadline_keeps_the_mean`); here that a
+/// pass with it reads within the whole sets' spread.
+#[test]
+fn a_later_set_with_a_walk_deadline_walks_part_of_its_walks() {
+    use lantern::cpu::Renderer;
+    use std::sync::atomic::AtomicBool;
+    use std::time::Instant;
+
+    let prepared = Arc::new(common::prepare_with("assets/scenes/thin_sphere.ron", |s| {
+        s.camera.width = 16;
+        s.camera.height = 16;
+        let i = &mut s.render.internal;
+        i.knobs.lights = 1024;
+        i.expert.walks = 16;
+    }));
+    let mut settings = prepared.scene.render.clone();
+    settings.method = Method::Internal;
+    settings.seed = 9;
+    settings.internal.expert.resample_every = 2;
+    let never = AtomicBool::new(false);
+    let renderer = Renderer::new(prepared.clone(), &settings, &never).unwrap();
+    let mean_of_set = |set: u32| -> f64 {
+        let passes = 16;
+        (0..passes)
+            .map(|p| {
+                let img = renderer.pass_in_set(1000 + p, set, &never).unwrap();
+                img.total
+                    .iter()
+                    .map(|v| f64::from(v.element_sum()))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / f64::from(passes)
+    };
+    let stats = |x: &[f64]| {
+        let n = x.len() as f64;
+        let m = x.iter().sum::<f64>() / n;
+        let var = x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0);
+        (m, var / n)
+    };
+    let (mut whole, mut cut) = (Vec::new(), Vec::new());
+    for set in 1..=8 {
+        assert_eq!(renderer.build_set(set, 64, &never, None), Some(1.0));
+        whole.push(mean_of_set(set));
+    }
+    for set in 9..=16 {
+        let share = renderer.build_set(set, 64, &never, Some(Instant::now()));
+        assert_eq!(share, Some(1.0 / 16.0), "one round of 16");
+        let lights = renderer.lights_for_set(set, &never).unwrap().unwrap();
+        assert_eq!((lights.walked, lights.walk_share), (1, 1.0 / 16.0));
+        cut.push(mean_of_set(set));
+    }
+    let ((mw, vw), (mc, vc)) = (stats(&whole), stats(&cut));
+    let z = (mc - mw) / (vw + vc).sqrt();
+    eprintln!(
+        "whole sets {mw:.4} ± {:.4}, one round {mc:.4} ± {:.4}: z {z:.2}",
+        vw.sqrt(),
+        vc.sqrt()
+    );
+    // Sums weighed as a whole set's lattice would read the harmonics'
+    // part 1/16 (the image 10 % dark here: z ≈ −9).
+    assert!(
+        z.abs() < 4.0,
+        "one round {mc} against whole sets {mw}: z {z:.2}"
+    );
+}

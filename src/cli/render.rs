@@ -66,7 +66,7 @@ pub struct RenderArgs {
 /// rendered, and a pass once begun is finished (a render overshoots its
 /// time by at most one pass: near the limit a balanced schedule keeps the
 /// light set in hand rather than build one it could not use,
-/// [`crate::render::renewal::BalancedRenewal::fresh_set_pays`]).
+/// [`crate::render::renewal::BalancedRenewal::fresh_set_share`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StopRule {
     /// At most this many passes (`None`: only the time limits).
@@ -450,6 +450,15 @@ fn print_sets(
                     format!("{n} passes long (run on to the time limit; its period {p})")
                 }
                 (_, p) => format!("{p} passes long"),
+            };
+            let share = b.planned_share();
+            let length = if share < 1.0 {
+                format!(
+                    "{length}, begun near the time limit to walk {:.0} % of a set's walks",
+                    100.0 * share
+                )
+            } else {
+                length
             };
             println!(
                 "{sets} more light sets, balanced against the passes: the last {length}{estimates}, its kernel of {} lights ({}){extra}",

@@ -153,19 +153,30 @@ impl Renderer {
     /// ([`kernel_neighbours_for_set`](crate::physics::internal::sources::kernel_neighbours_for_set)),
     /// and keeps it as the latest set ([`Renderer::lights_for_set`] then
     /// returns it): what a balanced schedule chooses
-    /// ([`BalancedRenewal::kernel_neighbours`]). Nothing for the reference
-    /// method or set 0; `None` if `cancel` is set meanwhile.
-    pub fn build_set(&self, set: u32, kernel_neighbours: u32, cancel: &AtomicBool) -> Option<()> {
+    /// ([`BalancedRenewal::kernel_neighbours`]), its walks stopping after
+    /// the round that ends past `walk_deadline` if one is given (a set
+    /// begun near a render's time limit,
+    /// [`BalancedRenewal::fresh_set_share`]). Returns the share of a whole
+    /// set's walks it walked (1 for the reference method or set 0, which
+    /// it leaves as they are); `None` if `cancel` is set meanwhile.
+    pub fn build_set(
+        &self,
+        set: u32,
+        kernel_neighbours: u32,
+        cancel: &AtomicBool,
+        walk_deadline: Option<Instant>,
+    ) -> Option<f64> {
         if self.internal.is_none() || set == 0 {
-            return Some(());
+            return Some(1.0);
         }
         let params = InternalParams {
             kernel_neighbours,
+            walk_deadline,
             ..internal_params_for_set(&self.prepared, &self.settings, set)
         };
         let mut later = self.later.lock().unwrap_or_else(PoisonError::into_inner);
         self.build_kept(&mut later, set, &params, cancel)
-            .map(|_| ())
+            .map(|lights| lights.walk_share)
     }
 
     /// Builds light set `set` with `params` and keeps it in `later` (the
@@ -322,8 +333,10 @@ impl Passes {
         if self.pass > 0 && schedule.next_starts_set_within(remaining) {
             self.set += 1;
             let t = Instant::now();
-            renderer.build_set(self.set, schedule.kernel_neighbours(), cancel)?;
-            schedule.add_set_build(t.elapsed().as_secs_f64());
+            let deadline = schedule.walk_deadline(t, schedule.planned_share());
+            let share =
+                renderer.build_set(self.set, schedule.kernel_neighbours(), cancel, deadline)?;
+            schedule.add_set_build(whole_set_secs(t.elapsed().as_secs_f64(), share));
         }
         let t = Instant::now();
         let img = renderer.pass_in_set(self.pass, self.set, cancel)?;

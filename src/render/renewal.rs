@@ -61,6 +61,23 @@ pub fn first_set_deadline(start: Instant, limit: Option<f64>) -> Option<Instant>
     limit.map(|t| start + Duration::from_secs_f64(FIRST_SET_SHARE * t.max(0.0)))
 }
 
+/// The least share of a whole set's walks that a set begun near a
+/// render's time limit walks ([`BalancedRenewal::fresh_set_share`]): where
+/// a whole set and a pass no longer fit before the limit, a fresh set's
+/// walks may stop after [`FIRST_SET_SHARE`] of the time left, as the first
+/// set's do, if that leaves it at least this share of its walks and the
+/// predicted variance says it pays.
+///
+/// Before, such a render ran on with the set in hand, whose passes then
+/// outweighed the other sets'. The thick cumulus at `--time 16` (sets of
+/// 3.4–4.3 s on two cores; seeds 31–40, each run before and after in
+/// turn): 8×8 blocks 9.50 → 7.88 %, per pixel 20.62 → 18.25 %, half of
+/// the renders ending with a set walked to 60–72 %
+/// ([validation §3.19](crate::doc::validation)). The floor keeps a set's
+/// walk noise within twice a whole one's, where the variance model (walk
+/// noise `1/share`) is least sure.
+pub const MIN_PARTIAL_SHARE: f64 = 0.5;
+
 /// What a whole light set's build takes, from `secs` measured for a
 /// build that walked `share` of its walks
 /// ([`InternalLights::walk_share`](crate::physics::internal::sources::InternalLights::walk_share)):
@@ -179,6 +196,9 @@ pub struct BalancedRenewal {
     /// within sets and the sets' means give; they change only as a set
     /// closes), kept for [`BalancedRenewal::noise_inflation`].
     at_set_start: Option<RenewalEstimates>,
+    /// The share of a whole set's walks the current set was begun to walk
+    /// ([`BalancedRenewal::fresh_set_share`]).
+    planned_share: f64,
 }
 
 impl BalancedRenewal {
@@ -207,6 +227,7 @@ impl BalancedRenewal {
             kernel_factors: 0.0,
             outweigh: None,
             at_set_start: None,
+            planned_share: 1.0,
         }
     }
 
@@ -310,57 +331,111 @@ impl BalancedRenewal {
             Some(true) => kernel_neighbours_for_noisy_set(self.sets),
             _ => kernel_neighbours_for_set(self.sets),
         };
+        self.planned_share = 1.0;
         true
     }
 
     /// [`BalancedRenewal::next_starts_set`] for a render that stops
     /// `remaining` seconds from now (`None`: no limit): a set that has its
     /// passes runs on instead of closing where a fresh one does not pay
-    /// before the limit ([`BalancedRenewal::fresh_set_pays`]). Without it a
-    /// render that stops at a time overshoots by a whole set's build when
-    /// it begins one just before the limit (2.8 s on the thick cumulus).
+    /// before the limit, and a fresh set may be planned to walk part of its
+    /// walks ([`BalancedRenewal::fresh_set_share`],
+    /// [`BalancedRenewal::planned_share`]). Without it a render that stops
+    /// at a time overshoots by a whole set's build when it begins one just
+    /// before the limit (2.8 s on the thick cumulus).
     pub fn next_starts_set_within(&mut self, remaining: Option<f64>) -> bool {
         if self.passes_in_set < self.period {
             return false;
         }
-        if remaining.is_some_and(|r| !self.fresh_set_pays(r)) {
-            return false;
+        let share = match remaining {
+            None => 1.0,
+            Some(r) => match self.fresh_set_share(r) {
+                Some(share) => share,
+                None => return false,
+            },
+        };
+        self.begin_set(share)
+    }
+
+    /// [`BalancedRenewal::next_starts_set`] for a set planned to walk
+    /// `share` of a whole set's walks (as
+    /// [`BalancedRenewal::fresh_set_share`] chose;
+    /// [`BalancedRenewal::planned_share`] then tells it).
+    pub fn begin_set(&mut self, share: f64) -> bool {
+        let started = self.next_starts_set();
+        if started {
+            self.planned_share = share;
         }
-        self.next_starts_set()
+        started
     }
 
     /// Whether a fresh set begun now, `remaining` seconds before a render's
     /// limit, leaves a less noisy image at the limit than the current set
-    /// running on to it, at the mean build and pass times measured so far
-    /// (`d`, `c`). Never where the fresh set's build and one pass do not
-    /// fit; always where its build and a whole period do (the balanced
-    /// schedule's own choice). In between, the image's predicted variance
-    /// `a/n + b Σn_s²/n²` (see [`BalancedRenewal::noise_inflation`]) is
-    /// compared for the two ways of spending the time, from the estimates
-    /// of `a` and `b` when the current set began; without them (before two
-    /// sets are complete) the fresh set begins.
-    pub fn fresh_set_pays(&self, remaining: f64) -> bool {
+    /// running on to it, and what share of a whole set's walks it walks:
+    /// `Some(1.0)` for a whole set, `Some(share)` for one whose walks stop
+    /// early, `None` where the current set should run on. From the mean
+    /// build and pass times measured so far (`d`, `c`):
+    ///
+    /// - where a whole set and a pass fit, the set is whole; where they do
+    ///   not, its walks stop after [`FIRST_SET_SHARE`] of the time left
+    ///   (`share = ¾ · remaining / d`), and no set begins where that share
+    ///   is below [`MIN_PARTIAL_SHARE`], leaves no time for a pass, or
+    ///   cannot be weighed (no estimates yet);
+    /// - the set begins where its walks and a whole period fit (the
+    ///   balanced schedule's own choice); in between, the image's
+    ///   predicted variance `a/n + b Σ n_s²/n²` (see
+    ///   [`BalancedRenewal::noise_inflation`]), the fresh set's term
+    ///   `n_s²/share` (a set walked to a share of its walks has about
+    ///   `1/share` of a whole set's walk noise), is compared
+    ///   for the two ways of spending the time, from the estimates of `a`
+    ///   and `b` when the current set began; without them (before two sets
+    ///   are complete) a whole fresh set begins and a partial one does
+    ///   not: where `b` is small (thin smoke at 1–2 s) a partial set only
+    ///   takes passes away (validation §3.19).
+    pub fn fresh_set_share(&self, remaining: f64) -> Option<f64> {
         let (c, d) = self.mean_secs();
-        if d + c > remaining {
-            return false;
+        let share = if d + c <= remaining {
+            1.0
+        } else if d > 0.0 && self.at_set_start.is_some() {
+            (FIRST_SET_SHARE * remaining / d).min(1.0)
+        } else {
+            return None;
+        };
+        if share < MIN_PARTIAL_SHARE || share * d + c > remaining {
+            return None;
         }
-        if c <= 0.0 || remaining >= d + f64::from(self.period) * c {
-            return true;
+        if c <= 0.0 || remaining >= share * d + f64::from(self.period) * c {
+            return Some(share);
         }
         let Some(e) = self.at_set_start else {
-            return true;
+            return Some(share);
         };
         let (a, b) = (e.pass_variance.max(0.0), e.set_variance.max(0.0));
         let (done, current) = (f64::from(self.passes), f64::from(self.passes_in_set));
         let variance = |n: f64, squares: f64| a / n + b * squares / (n * n);
         let kept = (remaining / c).floor();
-        let fresh = ((remaining - d) / c).floor().max(1.0);
+        let fresh = ((remaining - share * d) / c).floor().max(1.0);
         let keeping = variance(done + kept, self.square_lengths + (current + kept).powi(2));
         let renewing = variance(
             done + fresh,
-            self.square_lengths + current * current + fresh * fresh,
+            self.square_lengths + current * current + fresh * fresh / share,
         );
-        renewing < keeping
+        (renewing < keeping).then_some(share)
+    }
+
+    /// The share of a whole set's walks the current set was planned to
+    /// walk: 1, or less where it began near a render's time limit
+    /// ([`BalancedRenewal::next_starts_set_within`]).
+    pub fn planned_share(&self) -> f64 {
+        self.planned_share
+    }
+
+    /// When the walks of a set whose build begins at `start` and walks
+    /// `share` of a whole set's walks stop, at the mean build time measured
+    /// so far: `None` for a whole set.
+    pub fn walk_deadline(&self, start: Instant, share: f64) -> Option<Instant> {
+        let d = self.mean_secs().1;
+        (share < 1.0).then(|| start + Duration::from_secs_f64((share * d).max(0.0)))
     }
 
     /// Lights the automatic kernel of the current set holds: set 0 and
@@ -593,34 +668,68 @@ mod tests {
         r
     }
 
-    /// Near a time limit a fresh set begins only if it pays: never where
-    /// its build and a pass do not fit, always where its build and its
-    /// period do, and in between by the predicted variance. With 1.5 s
-    /// left, running on gives 15 more passes of the current set
-    /// (`a/55 + 925 b/55²`), a fresh set 5 passes of its own
-    /// (`a/45 + 425 b/45²`): the fresh set pays where `b/a` > 0.042.
+    /// Near a time limit a fresh set begins only if it pays: always where
+    /// its build and its period fit, by the predicted variance where only
+    /// its build and a pass do, and where not even those fit, walked to a
+    /// share of its walks (¾ of the time left over a whole set's build) if
+    /// that share is at least half and pays. With 1.5 s left, running on
+    /// gives 15 more passes of the current set (`a/55 + 925 b/55²`), a
+    /// fresh set 5 passes of its own (`a/45 + 425 b/45²`): the fresh set
+    /// pays where `b/a` > 0.042. With 1.05 s left a whole set and a pass
+    /// do not fit; a set walked to 0.7875 of its walks leaves 2 passes
+    /// (`a/42 + (400 + 4/0.7875) b/42²` against `a/50 + 700 b/50²`): it
+    /// pays where `b/a` is 0.1, not where it is 0.01. With 0.6 s left the
+    /// share would be 0.45.
     #[test]
     fn a_fresh_set_begins_near_the_limit_only_where_it_pays() {
         let noisy_sets = mid_render(0.1);
         let quiet_sets = mid_render(0.01);
         for r in [&noisy_sets, &quiet_sets] {
-            assert!(!r.fresh_set_pays(1.05), "no build and pass fit in 1.05 s");
-            assert!(r.fresh_set_pays(2.05), "a build and a period fit in 2.05 s");
+            assert_eq!(
+                r.fresh_set_share(2.05),
+                Some(1.0),
+                "a build and a period fit"
+            );
+            assert_eq!(r.fresh_set_share(0.6), None, "less than half a set fits");
         }
-        assert!(noisy_sets.fresh_set_pays(1.5));
-        assert!(!quiet_sets.fresh_set_pays(1.5));
+        assert_eq!(noisy_sets.fresh_set_share(1.5), Some(1.0));
+        assert_eq!(quiet_sets.fresh_set_share(1.5), None);
+        let partial = noisy_sets.fresh_set_share(1.05);
+        assert!(
+            partial.is_some_and(|f| (f - 0.7875).abs() < 1e-12),
+            "{partial:?}"
+        );
+        assert_eq!(quiet_sets.fresh_set_share(1.05), None);
         let mut limited = mid_render(0.01);
         assert!(!limited.next_starts_set_within(Some(1.5)));
         assert_eq!(limited.passes_in_set, 10, "the set runs on");
         assert!(limited.next_starts_set_within(None));
         assert_eq!((limited.passes_in_set, limited.sets), (0, 4));
+        assert_eq!(limited.planned_share(), 1.0);
+        let mut unmeasured = mid_render(0.1);
+        unmeasured.at_set_start = None;
+        assert_eq!(
+            unmeasured.fresh_set_share(1.05),
+            None,
+            "no estimates: runs on"
+        );
+        assert_eq!(unmeasured.fresh_set_share(1.5), Some(1.0));
+        let mut cut = mid_render(0.1);
+        assert!(cut.next_starts_set_within(Some(1.05)));
+        assert!((cut.planned_share() - 0.7875).abs() < 1e-12);
+        let start = Instant::now();
+        let deadline = cut.walk_deadline(start, cut.planned_share());
+        assert_eq!(deadline, Some(start + Duration::from_secs_f64(0.7875)));
+        assert_eq!(cut.walk_deadline(start, 1.0), None);
     }
 
     /// A render to a limit of 8 s whose sets take 2.8 s to build and whose
     /// passes 0.07 s (the thick cumulus on two cores) ends within a pass of
-    /// the limit: the set in hand runs on where a fresh one would end
-    /// past it. Asked without the limit, the same schedule begins a third
-    /// set at 5.88 s and ends at 8.75 s.
+    /// the limit: the set in hand runs on where a whole fresh one would
+    /// end past it (at 5.88 s one set is complete, too few to tell whether
+    /// a set walked to part of its walks would pay). Asked without the
+    /// limit, the same schedule begins a third set at 5.88 s and ends at
+    /// 8.75 s.
     #[test]
     fn a_timed_render_ends_within_a_pass_of_its_limit() {
         let (c, d, limit) = (0.07, 2.8, 8.0);
@@ -630,11 +739,14 @@ mod tests {
             r.add_set_build(d);
             let mut t = d;
             let mut passes = 0;
+            let mut shares = Vec::new();
             while passes == 0 || t < limit {
                 let remaining = bounded.then_some(limit - t);
                 if passes > 0 && r.next_starts_set_within(remaining) {
+                    // The set's build as measured, and as a whole set's.
+                    t += d * r.planned_share();
                     r.add_set_build(d);
-                    t += d;
+                    shares.push(r.planned_share());
                 }
                 let image = pass_image(&[0.0; 16], 1.0, &mut rng);
                 r.add_pass(&image, c);
@@ -643,9 +755,10 @@ mod tests {
             }
             if bounded {
                 assert!(t < limit + c + 1e-9, "ended at {t} s");
-                assert!(r.complete_sets() >= 1, "a second set began");
+                assert_eq!(shares, [1.0], "a second, whole set began");
             } else {
                 assert!(t > limit + 0.7, "ended at {t} s without the limit");
+                assert_eq!(shares, [1.0, 1.0]);
             }
         }
     }

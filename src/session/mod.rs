@@ -22,7 +22,7 @@ use std::time::Instant;
 use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuError, GpuRenderer};
 use crate::physics::internal::sources::InternalParams;
-use crate::render::renewal::BalancedRenewal;
+use crate::render::renewal::{whole_set_secs, BalancedRenewal};
 use crate::render::{internal_params_for_set, light_set_starting, PreparedScene};
 use crate::scene::{Method, RenderSettings};
 
@@ -114,15 +114,30 @@ fn set_gpu_lights(
     params: &InternalParams,
     builder: LightBuilder<'_>,
 ) -> Result<Renewal, GpuError> {
+    set_gpu_lights_walked(renderer, prepared, settings, params, builder)
+        .map(|walked| walked.map_or(Renewal::Cancelled, |_| Renewal::Renewed(set)))
+}
+
+/// [`set_gpu_lights`] telling the share of a whole set's walks the set
+/// walked ([`InternalLights::walk_share`](crate::physics::internal::sources::InternalLights::walk_share):
+/// less than 1 where `params` gave a walk deadline), or `None` where the
+/// CPU build was cancelled.
+fn set_gpu_lights_walked(
+    renderer: &mut GpuRenderer,
+    prepared: &PreparedScene,
+    settings: &RenderSettings,
+    params: &InternalParams,
+    builder: LightBuilder<'_>,
+) -> Result<Option<f64>, GpuError> {
     let lights = match builder {
         LightBuilder::Cpu(cancel) => match prepared.build_internal_lights(params, cancel) {
             Some(lights) => lights,
-            None => return Ok(Renewal::Cancelled),
+            None => return Ok(None),
         },
         LightBuilder::Gpu(ctx) => build_internal_lights_gpu(ctx, prepared, params)?,
     };
     renderer.set_internal_lights(&lights, settings.internal.expert.light_samples)?;
-    Ok(Renewal::Renewed(set))
+    Ok(Some(lights.walk_share))
 }
 
 /// A GPU renderer's passes one after another, its light sets renewed
@@ -146,6 +161,45 @@ struct GpuBalance {
     /// Per pixel the running sum and sum of squares when the current set
     /// began.
     at_set_start: Vec<(f64, f64)>,
+}
+
+impl GpuBalance {
+    /// Closes the current set (its sums read back from `renderer`) and
+    /// builds set `set` with the schedule's kernel, walking `share` of a
+    /// whole set's walks ([`BalancedRenewal::fresh_set_share`]), timed for
+    /// the schedule as a whole set's build.
+    fn renew(
+        &mut self,
+        renderer: &mut GpuRenderer,
+        prepared: &PreparedScene,
+        settings: &RenderSettings,
+        set: u32,
+        share: f64,
+        builder: LightBuilder<'_>,
+    ) -> Result<Renewal, GpuError> {
+        let t = Instant::now();
+        let running = renderer.read_back()?.grey_sums();
+        let sums: Vec<(f64, f64)> = running
+            .iter()
+            .zip(&self.at_set_start)
+            .map(|(now, then)| (now.0 - then.0, now.1 - then.1))
+            .collect();
+        self.schedule.replace_set_sums(&sums);
+        self.at_set_start = running;
+        self.schedule.begin_set(share);
+        let params = InternalParams {
+            kernel_neighbours: self.schedule.kernel_neighbours(),
+            walk_deadline: self.schedule.walk_deadline(t, share),
+            ..internal_params_for_set(prepared, settings, set)
+        };
+        let Some(walked) = set_gpu_lights_walked(renderer, prepared, settings, &params, builder)?
+        else {
+            return Ok(Renewal::Cancelled);
+        };
+        let secs = whole_set_secs(t.elapsed().as_secs_f64(), walked);
+        self.schedule.add_set_build(secs);
+        Ok(Renewal::Renewed(set))
+    }
 }
 
 impl GpuPasses {
@@ -194,8 +248,8 @@ impl GpuPasses {
 
     /// [`GpuPasses::next`] for a render that stops `remaining` seconds
     /// from now: with a balanced schedule, the set in hand runs on where a
-    /// fresh one would not pay before then
-    /// ([`BalancedRenewal::fresh_set_pays`]).
+    /// fresh one would not pay before then, and a fresh one may walk part
+    /// of its walks ([`BalancedRenewal::fresh_set_share`]).
     pub fn next_within(
         &mut self,
         renderer: &mut GpuRenderer,
@@ -206,29 +260,14 @@ impl GpuPasses {
     ) -> Result<Renewal, GpuError> {
         let renewal = match &mut self.balanced {
             None => renew_gpu_lights(renderer, prepared, settings, self.pass, builder)?,
-            Some(b)
-                if self.pass > 0
-                    && b.schedule.set_is_complete()
-                    && remaining.is_none_or(|r| b.schedule.fresh_set_pays(r)) =>
-            {
-                let t = Instant::now();
-                let running = renderer.read_back()?.grey_sums();
-                let sums: Vec<(f64, f64)> = running
-                    .iter()
-                    .zip(&b.at_set_start)
-                    .map(|(now, then)| (now.0 - then.0, now.1 - then.1))
-                    .collect();
-                b.schedule.replace_set_sums(&sums);
-                b.at_set_start = running;
-                b.schedule.next_starts_set();
-                let set = self.set + 1;
-                let params = InternalParams {
-                    kernel_neighbours: b.schedule.kernel_neighbours(),
-                    ..internal_params_for_set(prepared, settings, set)
-                };
-                let renewal = set_gpu_lights(renderer, prepared, settings, set, &params, builder)?;
-                b.schedule.add_set_build(t.elapsed().as_secs_f64());
-                renewal
+            Some(b) if self.pass > 0 && b.schedule.set_is_complete() => {
+                let share = remaining.map_or(Some(1.0), |r| b.schedule.fresh_set_share(r));
+                match share {
+                    Some(share) => {
+                        b.renew(renderer, prepared, settings, self.set + 1, share, builder)?
+                    }
+                    None => Renewal::Kept,
+                }
             }
             Some(_) => Renewal::Kept,
         };
