@@ -333,7 +333,7 @@ impl Passes {
         if self.pass > 0 && schedule.next_starts_set_within(remaining) {
             self.set += 1;
             let t = Instant::now();
-            let deadline = schedule.walk_deadline(t, schedule.planned_share());
+            let deadline = schedule.walk_deadline(t);
             let share =
                 renderer.build_set(self.set, schedule.kernel_neighbours(), cancel, deadline)?;
             schedule.add_set_build(whole_set_secs(t.elapsed().as_secs_f64(), share));

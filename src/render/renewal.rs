@@ -315,6 +315,14 @@ impl BalancedRenewal {
     /// rebalanced and the new set's kernel chosen
     /// ([`BalancedRenewal::kernel_neighbours`]).
     pub fn next_starts_set(&mut self) -> bool {
+        self.begin_set(1.0)
+    }
+
+    /// [`BalancedRenewal::next_starts_set`] for a set planned to walk
+    /// `share` of a whole set's walks (as
+    /// [`BalancedRenewal::fresh_set_share`] chose;
+    /// [`BalancedRenewal::planned_share`] then tells it).
+    pub fn begin_set(&mut self, share: f64) -> bool {
         if self.passes_in_set < self.period {
             return false;
         }
@@ -331,7 +339,7 @@ impl BalancedRenewal {
             Some(true) => kernel_neighbours_for_noisy_set(self.sets),
             _ => kernel_neighbours_for_set(self.sets),
         };
-        self.planned_share = 1.0;
+        self.planned_share = share;
         true
     }
 
@@ -355,18 +363,6 @@ impl BalancedRenewal {
             },
         };
         self.begin_set(share)
-    }
-
-    /// [`BalancedRenewal::next_starts_set`] for a set planned to walk
-    /// `share` of a whole set's walks (as
-    /// [`BalancedRenewal::fresh_set_share`] chose;
-    /// [`BalancedRenewal::planned_share`] then tells it).
-    pub fn begin_set(&mut self, share: f64) -> bool {
-        let started = self.next_starts_set();
-        if started {
-            self.planned_share = share;
-        }
-        started
     }
 
     /// Whether a fresh set begun now, `remaining` seconds before a render's
@@ -430,11 +426,11 @@ impl BalancedRenewal {
         self.planned_share
     }
 
-    /// When the walks of a set whose build begins at `start` and walks
-    /// `share` of a whole set's walks stop, at the mean build time measured
-    /// so far: `None` for a whole set.
-    pub fn walk_deadline(&self, start: Instant, share: f64) -> Option<Instant> {
-        let d = self.mean_secs().1;
+    /// When the walks of the current set, whose build begins at `start`,
+    /// stop: its [`planned_share`](BalancedRenewal::planned_share) of the
+    /// mean build time measured so far; `None` for a whole set.
+    pub fn walk_deadline(&self, start: Instant) -> Option<Instant> {
+        let (share, d) = (self.planned_share, self.mean_secs().1);
         (share < 1.0).then(|| start + Duration::from_secs_f64((share * d).max(0.0)))
     }
 
@@ -718,9 +714,9 @@ mod tests {
         assert!(cut.next_starts_set_within(Some(1.05)));
         assert!((cut.planned_share() - 0.7875).abs() < 1e-12);
         let start = Instant::now();
-        let deadline = cut.walk_deadline(start, cut.planned_share());
+        let deadline = cut.walk_deadline(start);
         assert_eq!(deadline, Some(start + Duration::from_secs_f64(0.7875)));
-        assert_eq!(cut.walk_deadline(start, 1.0), None);
+        assert_eq!(limited.walk_deadline(start), None, "a whole set");
     }
 
     /// A render to a limit of 8 s whose sets take 2.8 s to build and whose

@@ -102,27 +102,16 @@ pub fn renew_gpu_lights(
         return Ok(Renewal::Kept);
     };
     let params = internal_params_for_set(prepared, settings, set);
-    set_gpu_lights(renderer, prepared, settings, set, &params, builder)
+    let walked = set_gpu_lights(renderer, prepared, settings, &params, builder)?;
+    Ok(walked.map_or(Renewal::Cancelled, |_| Renewal::Renewed(set)))
 }
 
-/// Builds light set `set` with `params` and hands it to `renderer`.
-fn set_gpu_lights(
-    renderer: &mut GpuRenderer,
-    prepared: &PreparedScene,
-    settings: &RenderSettings,
-    set: u32,
-    params: &InternalParams,
-    builder: LightBuilder<'_>,
-) -> Result<Renewal, GpuError> {
-    set_gpu_lights_walked(renderer, prepared, settings, params, builder)
-        .map(|walked| walked.map_or(Renewal::Cancelled, |_| Renewal::Renewed(set)))
-}
-
-/// [`set_gpu_lights`] telling the share of a whole set's walks the set
-/// walked ([`InternalLights::walk_share`](crate::physics::internal::sources::InternalLights::walk_share):
+/// Builds a light set with `params` and hands it to `renderer`; the share
+/// of a whole set's walks it walked
+/// ([`InternalLights::walk_share`](crate::physics::internal::sources::InternalLights::walk_share):
 /// less than 1 where `params` gave a walk deadline), or `None` where the
-/// CPU build was cancelled.
-fn set_gpu_lights_walked(
+/// CPU build was cancelled (the renderer unchanged).
+fn set_gpu_lights(
     renderer: &mut GpuRenderer,
     prepared: &PreparedScene,
     settings: &RenderSettings,
@@ -189,11 +178,10 @@ impl GpuBalance {
         self.schedule.begin_set(share);
         let params = InternalParams {
             kernel_neighbours: self.schedule.kernel_neighbours(),
-            walk_deadline: self.schedule.walk_deadline(t, share),
+            walk_deadline: self.schedule.walk_deadline(t),
             ..internal_params_for_set(prepared, settings, set)
         };
-        let Some(walked) = set_gpu_lights_walked(renderer, prepared, settings, &params, builder)?
-        else {
+        let Some(walked) = set_gpu_lights(renderer, prepared, settings, &params, builder)? else {
             return Ok(Renewal::Cancelled);
         };
         let secs = whole_set_secs(t.elapsed().as_secs_f64(), walked);
