@@ -24,6 +24,16 @@
 //! carry no volume weight `V_i` (0), and the terms' energies and the point
 //! form of `L₁`, which do need one, come from the lights placed by density.
 //!
+//! `L₁`'s field form (method §6.3) reads `J` off the camera ray too: at a
+//! source point a phase-function direction and at most the rest of the
+//! window away from a point of the window. Where the camera stands inside
+//! the medium the windows fill a narrow cone from the eye, and most of
+//! those source points lie outside it, where the kernel found no light
+//! and read zero (a fog seen from inside: 29–36 % of `L₁`'s reads, its
+//! multiply scattered part 6.7 % dark; validation §3.20). So a share
+//! `scattered_share` of these lights takes that one more step from its
+//! window point, drawn as `L₁` draws its source point.
+//!
 //! Their kernel radius cannot come from the volume per light, since they
 //! fill a skin and not the box: [`knn_kernel_radius`] takes the median
 //! distance from a light to its `k`-th nearest neighbour instead, which
@@ -33,6 +43,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::clock::{march_clock, Clock, ClockMarch, ClockRay};
+use crate::physics::phase;
 use crate::physics::rng::Rng;
 use crate::physics::volume::{DensityField, Volume};
 
@@ -70,12 +81,13 @@ impl ViewFrame {
 /// Draws `count` points in the windows of the camera's rays (see the module
 /// doc), point `i` from stream `i` of `seed`. A point whose `TRIES` rays
 /// all miss the medium, or whose rays all leave it before the drawn clock,
-/// is `None`.
+/// is `None`. With probability `scattered_share` a point then moves to a
+/// source point of `L₁` about it ([`scattered_source`]).
 pub fn place_in_view<D: DensityField>(
     vol: &Volume<D>,
     frame: &ViewFrame,
-    clock: Clock,
-    s_star: f32,
+    (clock, s_star): (Clock, f32),
+    scattered_share: f32,
     count: usize,
     seed: u64,
 ) -> Vec<Option<Vec3>> {
@@ -107,12 +119,57 @@ pub fn place_in_view<D: DensityField>(
                     t_exit: span,
                 };
                 if let ClockMarch::Reached(t) = march_clock(vol, &ray, 0.0, span, budget) {
-                    return Some(origin + dir * t);
+                    let y = origin + dir * t;
+                    if rng.next_f32() < scattered_share {
+                        let left = s_star - budget;
+                        return Some(scattered_source(
+                            vol,
+                            (clock, s_star),
+                            y,
+                            -dir,
+                            left,
+                            &mut rng,
+                        ));
+                    }
+                    return Some(y);
                 }
             }
             None
         })
         .collect()
+}
+
+/// A source point of `L₁`'s field form (method §6.3) about the window point
+/// `y` seen along `towards` (towards the eye), with `left` of the window's
+/// clock still to spend: light travelling along a direction drawn from the
+/// phase function about `towards` arrives at `y` from a point whose clock
+/// from `y` is uniform in `[0, left]`, as `L₁` draws it. `y` itself where
+/// that line leaves the medium before the drawn clock.
+fn scattered_source<D: DensityField>(
+    vol: &Volume<D>,
+    (clock, s_star): (Clock, f32),
+    y: Vec3,
+    towards: Vec3,
+    left: f32,
+    rng: &mut Rng,
+) -> Vec3 {
+    let travel = phase::sample_hg(vol.optics.g, towards, rng.next_f32(), rng.next_f32());
+    let back = -travel;
+    let budget = rng.next_f32() * left.max(0.0);
+    let Some((_, exit)) = vol.clip(y, back) else {
+        return y;
+    };
+    let ray = ClockRay {
+        clock,
+        s_star,
+        origin: y,
+        dir: back,
+        t_exit: exit,
+    };
+    match march_clock(vol, &ray, 0.0, exit, budget) {
+        ClockMarch::Reached(r) => y + back * r,
+        ClockMarch::Exhausted(_) => y,
+    }
 }
 
 /// The median, over up to `samples` of `positions` spread evenly through
@@ -174,7 +231,7 @@ mod tests {
         };
         let vol = Volume::new(Ball { radius: 1.0 }, optics, 32);
         let s_star = 2.0;
-        let pts = place_in_view(&vol, &frame(), Clock::OpticalDepth, s_star, 4000, 3);
+        let pts = place_in_view(&vol, &frame(), (Clock::OpticalDepth, s_star), 0.0, 4000, 3);
         let placed: Vec<Vec3> = pts.iter().flatten().copied().collect();
         assert_eq!(placed.len(), pts.len(), "the ball fills the image's centre");
         let eye = frame().eye;
