@@ -237,27 +237,14 @@ pub fn phase_walks(params: &InternalParams, g: f32) -> u32 {
     }
 }
 
-/// The share of the lights placed in the camera's windows that move on to
-/// a source point of `L₁` ([`place_in_view`]): where `L₁`'s field form reads
-/// the harmonics at points off the camera ray. With phase walks its first
-/// scattering reads them on the ray itself, and the points form reads the
-/// lights placed by density: none there.
-///
-/// Half, as `L₁` reads the lights about as often as `L₀` does (once per
-/// point of the window, and its further scatterings by roulette). A fog
-/// seen from inside (validation §3.20): its multiply scattered part
-/// −6.7 % with none, −3.5 % with a quarter, −1.9 % with half; the suite's
-/// media without phase walks at 16 sets within their seeds' spread.
-pub const SCATTERED_VIEW_SHARE: f32 = 0.5;
-
-/// [`SCATTERED_VIEW_SHARE`] where it applies with `params` in a medium of
-/// asymmetry `g`, else 0.
-pub fn scattered_view_share(params: &InternalParams, g: f32) -> f32 {
-    if params.l1 == L1Form::Field && phase_walks(params, g) == 0 {
-        SCATTERED_VIEW_SHARE
-    } else {
-        0.0
-    }
+/// Whether `L₁` reads the lights' harmonics off the camera ray with
+/// `params` in a medium of asymmetry `g` (its field form without phase
+/// walks), so that lights may move on from the camera's windows to its
+/// source points ([`place_in_view`]): with phase walks its first
+/// scattering reads on the ray itself, and the points form reads the
+/// lights placed by density.
+pub fn l1_reads_off_the_ray(params: &InternalParams, g: f32) -> bool {
+    params.l1 == L1Form::Field && phase_walks(params, g) == 0
 }
 
 /// Lights the automatic kernel holds in light set `set` of a render
@@ -743,7 +730,7 @@ pub fn place_internal_lights<D: DensityField>(
             vol,
             &params.view_frame,
             (params.clock, params.s_star),
-            scattered_view_share(params, vol.optics.g),
+            l1_reads_off_the_ray(params, vol.optics.g).then_some(params.kernel_neighbours),
             m_view,
             params.seed,
         )
