@@ -36,8 +36,8 @@ fn every_example_scene_round_trips_and_loads() {
         let (lo, hi) = density.bounds();
         assert!(hi.cmpgt(lo).all(), "{}", path.display());
     }
-    // 6 examples, 7 suite scenes, 14 studies.
-    assert!(paths.len() >= 27, "only {} scene files", paths.len());
+    // 6 examples, 7 suite scenes, 18 studies.
+    assert!(paths.len() >= 31, "only {} scene files", paths.len());
 }
 
 /// A valid scene with one line replaced.
