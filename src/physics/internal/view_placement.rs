@@ -135,8 +135,8 @@ struct WindowPoint {
 /// the lights off the camera ray), a pilot of `L₁`'s source points about
 /// the window points measures how many find no light within the windows'
 /// kernel radius; above [`UNSERVED_READS`], [`SCATTERED_VIEW_SHARE`] of the
-/// points move on to a source point of `L₁` about them
-/// ([`scattered_source`]).
+/// points move on to a source point of `L₁` about them, drawn as `L₁`
+/// draws it (method §6.3).
 pub fn place_in_view<D: DensityField>(
     vol: &Volume<D>,
     frame: &ViewFrame,
@@ -324,18 +324,24 @@ mod tests {
         }
     }
 
+    /// The unit ball of extinction `sigma_t`, albedo 0.9 and asymmetry `g`,
+    /// 32 majorant cells across.
+    fn ball(sigma_t: f32, g: f32) -> Volume<Ball> {
+        let optics = Optics {
+            sigma_t: Vec3::splat(sigma_t),
+            albedo: Vec3::splat(0.9),
+            g,
+        };
+        Volume::new(Ball { radius: 1.0 }, optics, 32)
+    }
+
     #[test]
     fn view_points_lie_in_the_windows_with_the_transmittance_profile() {
         // σ_t 40 and s* = 2 mean free paths: the window is 0.05 deep along
         // each ray. 32 majorant cells across the ball: the clock's
         // quadrature steps are at most s*/4 = 0.5 mean free paths, so a
         // point's clock is exact to a quarter of one at the ball's edge.
-        let optics = Optics {
-            sigma_t: Vec3::splat(40.0),
-            albedo: Vec3::splat(0.9),
-            g: 0.0,
-        };
-        let vol = Volume::new(Ball { radius: 1.0 }, optics, 32);
+        let vol = ball(40.0, 0.0);
         let s_star = 2.0;
         let pts = place_in_view(&vol, &frame(), (Clock::OpticalDepth, s_star), None, 4000, 3);
         let placed: Vec<Vec3> = pts.iter().flatten().copied().collect();
@@ -372,12 +378,7 @@ mod tests {
     /// from outside: there the lights stay exactly where they were.
     #[test]
     fn lights_move_to_l1_sources_only_where_the_windows_leave_them_unserved() {
-        let optics = Optics {
-            sigma_t: Vec3::splat(1.0),
-            albedo: Vec3::splat(0.9),
-            g: 0.3,
-        };
-        let vol = Volume::new(Ball { radius: 1.0 }, optics, 32);
+        let vol = ball(1.0, 0.3);
         let window = (Clock::OpticalDepth, 0.5);
         let windows_only = |frame: &ViewFrame| place_in_view(&vol, frame, window, None, 4000, 3);
         let points = |frame: &ViewFrame| -> Vec<Option<WindowPoint>> {
