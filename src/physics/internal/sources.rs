@@ -84,7 +84,7 @@ use super::clock::{march_clock, Clock, ClockMarch, ClockRay, GateSettings};
 
 use super::light_index::LightGrid;
 use super::placement::{place_lights_with, PlacementDensity};
-use super::view_placement::{knn_kernel_radius, place_in_view, ViewFrame};
+use super::view_placement::{knn_kernel_radius, place_in_view, PilotKernel, ViewFrame};
 use super::walk::Walks;
 use crate::physics::lights::Lights;
 use crate::physics::phase;
@@ -730,7 +730,10 @@ pub fn place_internal_lights<D: DensityField>(
             vol,
             &params.view_frame,
             (params.clock, params.s_star),
-            l1_reads_off_the_ray(params, vol.optics.g).then_some(params.kernel_neighbours),
+            l1_reads_off_the_ray(params, vol.optics.g).then_some(match params.kernel_radius {
+                Some(h) => PilotKernel::Radius(h),
+                None => PilotKernel::Neighbours(params.kernel_neighbours),
+            }),
             m_view,
             params.seed,
         )

@@ -117,6 +117,17 @@ const PILOT_STREAM: u32 = 0x7069_6c74;
 /// none move the lights are where they were.
 const SCATTERED_STREAM: u32 = 0x7363_6174;
 
+/// The kernel the pilot of [`place_in_view`] measures `L₁`'s reads with: the
+/// automatic one, holding about this many lights, or a radius the user set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PilotKernel {
+    /// The automatic kernel's neighbours (its radius measured over the
+    /// windows' lights, as [`knn_kernel_radius`] does).
+    Neighbours(u32),
+    /// A fixed radius.
+    Radius(f32),
+}
+
 /// A point of a camera ray's window: where it lies, the direction of the
 /// ray and the clock left in the window after it.
 #[derive(Clone, Copy)]
@@ -131,8 +142,8 @@ struct WindowPoint {
 /// all miss the medium, or whose rays all leave it before the drawn clock,
 /// is `None`.
 ///
-/// With `scattered` (the kernel's neighbours, where `L₁`'s field form reads
-/// the lights off the camera ray), a pilot of `L₁`'s source points about
+/// With `scattered` (the kernel, where `L₁`'s field form reads the lights
+/// off the camera ray), a pilot of `L₁`'s source points about
 /// the window points measures how many find no light within the windows'
 /// kernel radius; above [`UNSERVED_READS`], [`SCATTERED_VIEW_SHARE`] of the
 /// points move on to a source point of `L₁` about them, drawn as `L₁`
@@ -141,7 +152,7 @@ pub fn place_in_view<D: DensityField>(
     vol: &Volume<D>,
     frame: &ViewFrame,
     window: (Clock, f32),
-    scattered: Option<u32>,
+    scattered: Option<PilotKernel>,
     count: usize,
     seed: u64,
 ) -> Vec<Option<Vec3>> {
@@ -150,7 +161,7 @@ pub fn place_in_view<D: DensityField>(
         .map(|i| window_point(vol, frame, window, seed, i as u32))
         .collect();
     let share = match scattered {
-        Some(k) if unserved_share(vol, window, &points, k, seed) > UNSERVED_READS => {
+        Some(kernel) if unserved_share(vol, window, &points, kernel, seed) > UNSERVED_READS => {
             SCATTERED_VIEW_SHARE
         }
         _ => 0.0,
@@ -215,18 +226,25 @@ fn window_point<D: DensityField>(
 }
 
 /// The share of `L₁`'s source points about [`PILOT_POINTS`] of the window
-/// points, those in the medium, with no window point within the radius
-/// that holds `k` of them ([`knn_kernel_radius`]); 0 where there are too
+/// points, those in the medium, with no window point within the
+/// `kernel`'s radius (for the automatic kernel, the radius that holds its
+/// neighbours among them, [`knn_kernel_radius`]); 0 where there are too
 /// few.
 fn unserved_share<D: DensityField>(
     vol: &Volume<D>,
     window: (Clock, f32),
     points: &[Option<WindowPoint>],
-    k: u32,
+    kernel: PilotKernel,
     seed: u64,
 ) -> f32 {
     let positions: Vec<Vec3> = points.iter().flatten().map(|p| p.position).collect();
-    let Some(h) = knn_kernel_radius(&positions, k as usize, PILOT_RADIUS_SAMPLES) else {
+    let radius = match kernel {
+        PilotKernel::Neighbours(k) => {
+            knn_kernel_radius(&positions, k as usize, PILOT_RADIUS_SAMPLES)
+        }
+        PilotKernel::Radius(h) => (h > 0.0 && !positions.is_empty()).then_some(h),
+    };
+    let Some(h) = radius else {
         return 0.0;
     };
     let step = (points.len() / PILOT_POINTS).max(1);
@@ -388,18 +406,48 @@ mod tests {
         };
 
         let outside = frame();
-        let unserved = unserved_share(&vol, window, &points(&outside), 64, 3);
+        let unserved = unserved_share(
+            &vol,
+            window,
+            &points(&outside),
+            PilotKernel::Neighbours(64),
+            3,
+        );
         assert!(unserved < UNSERVED_READS, "outside: {unserved}");
-        let placed = place_in_view(&vol, &outside, window, Some(64), 4000, 3);
+        let placed = place_in_view(
+            &vol,
+            &outside,
+            window,
+            Some(PilotKernel::Neighbours(64)),
+            4000,
+            3,
+        );
         assert_eq!(placed, windows_only(&outside), "outside, the lights stay");
 
         let inside = ViewFrame {
             eye: Vec3::new(0.0, 0.0, 0.3),
             ..frame()
         };
-        let unserved = unserved_share(&vol, window, &points(&inside), 64, 3);
+        let unserved = unserved_share(
+            &vol,
+            window,
+            &points(&inside),
+            PilotKernel::Neighbours(64),
+            3,
+        );
         assert!(unserved > UNSERVED_READS, "inside: {unserved}");
-        let placed = place_in_view(&vol, &inside, window, Some(64), 4000, 3);
+        // A kernel set as wide as the ball holds a window light at every
+        // read.
+        let wide = unserved_share(&vol, window, &points(&inside), PilotKernel::Radius(2.0), 3);
+        assert_eq!(wide, 0.0, "inside, a kernel of radius 2");
+        let placed = place_in_view(
+            &vol,
+            &inside,
+            window,
+            Some(PilotKernel::Neighbours(64)),
+            4000,
+            3,
+        );
         let stayed = windows_only(&inside);
         let moved = placed.iter().zip(&stayed).filter(|(a, b)| a != b).count();
         // Half of 4000 chosen (sd 32), less the few whose step leaves
