@@ -45,6 +45,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::clock::{march_clock, Clock, ClockMarch, ClockRay};
+use super::light_index::LightGrid;
 use crate::physics::phase;
 use crate::physics::rng::Rng;
 use crate::physics::volume::{DensityField, Volume};
@@ -247,6 +248,9 @@ fn unserved_share<D: DensityField>(
     let Some(h) = radius else {
         return 0.0;
     };
+    // The windows' lights bucketed as the reconstruction's own index
+    // buckets every light (cells of about the kernel's radius).
+    let grid = LightGrid::build(&positions, |_| true, vol.bounds, h, 96);
     let step = (points.len() / PILOT_POINTS).max(1);
     let pilot: Vec<usize> = (0..points.len()).step_by(step).collect();
     let (reads, unserved) = pilot
@@ -255,7 +259,13 @@ fn unserved_share<D: DensityField>(
             let mut rng = Rng::for_sample(seed, i as u32, PILOT_STREAM);
             let x = scattered_source(vol, window, points[i]?, &mut rng)?;
             (vol.density.density(x) > 0.0).then(|| {
-                let served = positions.iter().any(|q| (*q - x).length_squared() < h * h);
+                let mut served = false;
+                grid.for_each_near_run(x, h, |run| {
+                    served = served
+                        || grid.ids()[run]
+                            .iter()
+                            .any(|&i| (positions[i as usize] - x).length_squared() < h * h);
+                });
                 (1u32, u32::from(!served))
             })
         })
@@ -405,49 +415,29 @@ mod tests {
                 .collect()
         };
 
+        let automatic = PilotKernel::Neighbours(64);
+        let pilot =
+            |frame: &ViewFrame, kernel| unserved_share(&vol, window, &points(frame), kernel, 3);
+        let with_pilot =
+            |frame: &ViewFrame| place_in_view(&vol, frame, window, Some(automatic), 4000, 3);
+
         let outside = frame();
-        let unserved = unserved_share(
-            &vol,
-            window,
-            &points(&outside),
-            PilotKernel::Neighbours(64),
-            3,
-        );
+        let unserved = pilot(&outside, automatic);
         assert!(unserved < UNSERVED_READS, "outside: {unserved}");
-        let placed = place_in_view(
-            &vol,
-            &outside,
-            window,
-            Some(PilotKernel::Neighbours(64)),
-            4000,
-            3,
-        );
+        let placed = with_pilot(&outside);
         assert_eq!(placed, windows_only(&outside), "outside, the lights stay");
 
         let inside = ViewFrame {
             eye: Vec3::new(0.0, 0.0, 0.3),
             ..frame()
         };
-        let unserved = unserved_share(
-            &vol,
-            window,
-            &points(&inside),
-            PilotKernel::Neighbours(64),
-            3,
-        );
+        let unserved = pilot(&inside, automatic);
         assert!(unserved > UNSERVED_READS, "inside: {unserved}");
         // A kernel set as wide as the ball holds a window light at every
         // read.
-        let wide = unserved_share(&vol, window, &points(&inside), PilotKernel::Radius(2.0), 3);
+        let wide = pilot(&inside, PilotKernel::Radius(2.0));
         assert_eq!(wide, 0.0, "inside, a kernel of radius 2");
-        let placed = place_in_view(
-            &vol,
-            &inside,
-            window,
-            Some(PilotKernel::Neighbours(64)),
-            4000,
-            3,
-        );
+        let placed = with_pilot(&inside);
         let stayed = windows_only(&inside);
         let moved = placed.iter().zip(&stayed).filter(|(a, b)| a != b).count();
         // Half of 4000 chosen (sd 32), less the few whose step leaves
