@@ -27,7 +27,9 @@ use anyhow::{bail, Context, Result};
 use glam::Vec3;
 
 use super::args::InternalArgs;
-use super::support::{load_square, output_dir, render_timed, renewal_text, variance_path};
+use super::support::{
+    load_square, output_dir, render_timed, renewal_text, variance_path, walk_split_text,
+};
 use crate::cpu::Renderer;
 use crate::render::export::{read_exr, write_exr};
 use crate::render::film::image_mean;
@@ -451,7 +453,7 @@ pub fn run(args: &ConvergeArgs) -> Result<()> {
         report,
         "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}, {} window scattering(s), {} view walks, {}\n",
         i.knobs.lights,
-        i.expert.walks,
+        walk_split_text(i.expert.walks, i.expert.view_walks, prepared.volume.optics.g),
         i.knobs.terms,
         i.knobs.s_star
             .map_or("scene default".to_owned(), |s| s.to_string()),

@@ -45,7 +45,8 @@ use glam::Vec3;
 
 use super::args::InternalArgs;
 use super::support::{
-    gpu_context, gpu_renderer, load_square, renewal_text, variance_path, warn_cut_short,
+    gpu_context, gpu_renderer, load_square, renewal_text, variance_path, walk_split_text,
+    warn_cut_short,
 };
 use crate::cpu::{Passes, Renderer};
 use crate::gpu::GpuContext;
@@ -525,7 +526,7 @@ fn scene_report(
         md,
         "internal lights: M = {}, K = {}, N = {}, s* = {}, SH order {}, clock {:?}, L1 {:?}, {} light sample(s), {}\n",
         i.knobs.lights,
-        i.expert.walks,
+        walk_split_text(i.expert.walks, i.expert.view_walks, prepared.volume.optics.g),
         i.knobs.terms,
         i.knobs.s_star.map_or("auto".to_owned(), |s| s.to_string()),
         i.expert.sh_order,

@@ -255,10 +255,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if let Some(lights) = renderer.internal_lights() {
         let walks = walks_text(lights.walked, lights.params.walks, lights.walk_share);
         println!(
-            "internal lights: M = {}, s* = {:.4}, N = {}, K = {walks}, h = {:.4}, clock {:?}: placed in {:.3} s, walked in {:.3} s",
+            "internal lights: M = {}, s* = {:.4}, N = {}, K = {walks}, K_v = {}, h = {:.4}, clock {:?}: placed in {:.3} s, walked in {:.3} s",
             lights.len(),
             lights.s_star,
             lights.params.terms,
+            lights.params.view_walks,
             lights.kernel_radius,
             lights.params.clock,
             lights.timings.placement,

@@ -14,7 +14,7 @@ use glam::Vec3;
 use crate::cpu::Renderer;
 use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuRenderer};
-use crate::physics::internal::sources::{BuildTimings, InternalParams};
+use crate::physics::internal::sources::{walk_split, BuildTimings, InternalParams};
 use crate::render::{internal_params, Film, PreparedScene};
 use crate::scene::{Method, RenderSettings, Scene};
 
@@ -58,6 +58,18 @@ impl GpuBuild {
     /// share walked (what a balanced schedule weighs later sets by).
     pub fn whole_set_secs(&self) -> f64 {
         crate::render::renewal::whole_set_secs(self.timings.total(), self.walk_share)
+    }
+}
+
+/// `K` as the reports print it: the spread walks asked for, and where
+/// phase walks serve `L₁` in a medium of asymmetry `g` how they are split
+/// ([`walk_split`]).
+pub fn walk_split_text(walks: u32, view_walks: u32, g: f32) -> String {
+    let (spread, view) = walk_split(walks, view_walks, g);
+    if (spread, view) == (walks, view_walks) {
+        walks.to_string()
+    } else {
+        format!("{walks} (phase walks serve L1: {spread} spread, {view} towards the eye)")
     }
 }
 
@@ -110,11 +122,12 @@ pub fn gpu_renderer(
             };
             let lights = build_internal_lights_gpu(ctx, prepared, &params)?;
             println!(
-                "internal lights (built on the GPU): M = {}, s* = {:.4}, N = {}, K = {}, clock {:?}: placed in {:.3} s, walked in {:.3} s (GPU), indexed in {:.3} s (CPU)",
+                "internal lights (built on the GPU): M = {}, s* = {:.4}, N = {}, K = {}, K_v = {}, clock {:?}: placed in {:.3} s, walked in {:.3} s (GPU), indexed in {:.3} s (CPU)",
                 lights.len(),
                 lights.s_star,
                 lights.params.terms,
                 walks_text(lights.walked, lights.params.walks, lights.walk_share),
+                lights.params.view_walks,
                 lights.params.clock,
                 lights.timings.placement,
                 lights.timings.walks,

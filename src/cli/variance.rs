@@ -35,7 +35,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use super::args::InternalArgs;
-use super::support::load_square;
+use super::support::{load_square, walk_split_text};
 use crate::cpu::pixel_ray;
 use crate::physics::internal::clock::GateSettings;
 use crate::physics::internal::gather::{gather, GatherSample};
@@ -339,11 +339,13 @@ pub fn measure(
     })
 }
 
-/// The report as a Markdown table.
+/// The report as a Markdown table, for a medium of asymmetry `g` (how
+/// the walks are split).
 pub fn format_report(
     name: &str,
     size: (u32, u32),
     settings: &RenderSettings,
+    g: f32,
     r: &NoiseReport,
 ) -> String {
     let i = &settings.internal;
@@ -354,7 +356,7 @@ pub fn format_report(
         size.0,
         size.1,
         i.knobs.lights,
-        i.expert.walks,
+        walk_split_text(i.expert.walks, i.expert.view_walks, g),
         i.knobs.terms,
         i.knobs.s_star.map_or("scene default".to_owned(), |v| v.to_string()),
         i.expert.sh_order,
@@ -435,7 +437,10 @@ pub fn run(args: &NoiseArgs) -> Result<()> {
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
     let size = (prepared.camera.width, prepared.camera.height);
-    print!("{}", format_report(&name, size, &settings, &report));
+    print!(
+        "{}",
+        format_report(&name, size, &settings, prepared.volume.optics.g, &report)
+    );
     Ok(())
 }
 
@@ -537,7 +542,7 @@ mod tests {
             n > 0 && w.relative_variance > 0.0 && w.top_share <= 1.0,
             "{w:?}"
         );
-        let text = format_report("thin_sphere", (24, 24), &settings, &one);
+        let text = format_report("thin_sphere", (24, 24), &settings, 0.0, &one);
         assert!(text.contains("| light sets"), "{text}");
     }
 }

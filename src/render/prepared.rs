@@ -11,7 +11,7 @@ use glam::Vec3;
 use crate::physics::environment::{EnvMap, Environment, EnvironmentKind};
 use crate::physics::internal::placement::PlacementDensity;
 use crate::physics::internal::sources::{
-    kernel_neighbours_for_set, placement_density, InternalLights, InternalParams,
+    kernel_neighbours_for_set, placement_density, walk_split, InternalLights, InternalParams,
 };
 use crate::physics::internal::view_placement::ViewFrame;
 use crate::physics::lights::{Lights, PointLight, Sun};
@@ -385,7 +385,9 @@ pub fn lights_of(lights: &[Light]) -> Lights {
 }
 
 /// The internal-lights parameters of `settings` for this scene, with the
-/// defaults resolved (`s*`: [`default_s_star`]). These are the parameters
+/// defaults resolved (`s*`: [`default_s_star`]) and the walks split for
+/// the medium ([`walk_split`]: where phase walks serve `L₁`, most of the
+/// spread walks' time goes towards the eye). These are the parameters
 /// of light set 0; see
 /// [`internal_params_for_set`].
 pub fn internal_params(prepared: &PreparedScene, settings: &RenderSettings) -> InternalParams {
@@ -425,11 +427,18 @@ pub fn internal_params_for_set(
         .knobs
         .s_star
         .unwrap_or_else(|| default_s_star(&prepared.volume, clock));
+    // Where phase walks serve `L₁`, most of the spread walks' time goes
+    // towards the eye instead.
+    let (walks, view_walks) = walk_split(
+        s.expert.walks,
+        s.expert.view_walks,
+        prepared.volume.optics.g,
+    );
     InternalParams {
         s_star,
         lights: s.knobs.lights as usize,
         terms: s.knobs.terms,
-        walks: s.expert.walks,
+        walks,
         sh_order: s.expert.sh_order,
         kernel_radius: s.expert.kernel_radius,
         kernel_neighbours: kernel_neighbours_for_set(set),
@@ -437,7 +446,7 @@ pub fn internal_params_for_set(
         clock,
         l1: s.expert.l1,
         window_scatters: s.expert.window_scatters,
-        view_walks: s.expert.view_walks,
+        view_walks,
         // Only the view walks tie the lights to the camera: without them
         // moving the camera must not re-sample the lights.
         eye: if s.expert.view_walks > 0 || s.expert.view_share > 0.0 {

@@ -17,6 +17,7 @@ use super::sky::{SkyState, SkyUi};
 use super::state::{CompareMode, Document, LightQuantity, NavPreset, Session, Toast};
 use super::widgets::rgb_intensity_ui;
 use crate::physics::internal::clock::RESOLVED_TERMS;
+use crate::physics::internal::sources::{walk_split, PHASE_WALKS_MIN_G};
 use crate::physics::sh::MAX_ORDER;
 use crate::render::tonemap::ViewTransform;
 use crate::scene::settings::MAX_TERMS;
@@ -348,6 +349,19 @@ fn internal_detail_ui(ui: &mut Ui, app: &mut ControlsState<'_>) {
              the harmonics, as in Tessendorf's note. With view walks, moving the \
              camera re-samples the lights.",
         );
+    let (walks, view_walks) =
+        walk_split(s.expert.walks, s.expert.view_walks, app.doc.scene.medium.g);
+    if (walks, view_walks) != (s.expert.walks, s.expert.view_walks) {
+        ui.label(format!(
+            "|g| ≥ {PHASE_WALKS_MIN_G}: phase walks serve L₁, so each light walks \
+             {walks} spread and {view_walks} towards the camera"
+        ))
+        .on_hover_text(
+            "Where the phase function's peak is sharp the image reads no spherical \
+             harmonics; the spread walks feed only F, the energies and the gizmos, \
+             and three quarters of their time goes to walks towards the camera.",
+        );
+    }
     ui.add(Slider::new(&mut s.expert.view_share, 0.0..=1.0).text("lights in view"))
         .on_hover_text(
             "Share of the lights placed where the camera reads them: in the first \
