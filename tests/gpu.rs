@@ -1584,7 +1584,7 @@ fn walk_mirrors_match_wgsl_layout() {
             eye,
             view_walks,
             phase_walks,
-            _pad0,
+            majorant_peak,
             _pad1,
             _pad2
         ]

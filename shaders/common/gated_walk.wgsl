@@ -234,6 +234,17 @@ var<private> walk_unscattered: vec3<f32>;
 // part); `walk_unscattered` then stays zero. Set per walk by the caller.
 var<private> walk_collided_only: bool;
 
+// When true, a walk on the optical-depth clock reads the rest of its path
+// at its collisions after `COLLISION_TAIL_AFTER` of them (`collision_tail`):
+// the walks towards the eye and the phase walks, whose callers sum the
+// terms, in a medium of `|g|` ≥ `COLLISION_TAIL_MIN_G`. Set per walk by the
+// caller, with `walk_majorant_peak`, the medium's largest extinction
+// majorant, which bounds the tail's clock. `COLLISION_TAIL_AFTER` and
+// `COLLISION_TAIL_MIN_G` come from Rust (the generated prelude:
+// crate::physics::internal::walk).
+var<private> walk_sums_terms: bool;
+var<private> walk_majorant_peak: f32;
+
 // Probability that a walk's direction after a collision is drawn towards an
 // external light rather than from the phase function, and the
 // Henyey–Greenstein parameter of those lobes: `GUIDE_PROBABILITY` and
@@ -461,6 +472,197 @@ struct OwnFlight {
     clock: f32,
 }
 
+// Where a walk hands its gates over to `collision_tail`, or the tail hands
+// the walk back (`TailState`): at a collision, with the walk's new
+// direction and weight, that collision's second flight, the exact clock
+// there and the collisions so far. `back` is false where the walk ended.
+struct TailState {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    weight: vec3<f32>,
+    second: SecondFlight,
+    clock: f32,
+    collisions: u32,
+    back: bool,
+}
+
+// The majorant optical depth from `origin` along `dir` over `[t0, t1]`
+// (`majorant_depth`): an upper bound of the clock over a flight there.
+fn majorant_depth(origin: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> f32 {
+    var it = dda_start(origin, dir, t0, t1);
+    var depth = 0.0;
+    loop {
+        let seg = dda_next(&it);
+        if !seg.valid {
+            break;
+        }
+        depth += seg.majorant * (seg.t1 - seg.t0);
+    }
+    return depth;
+}
+
+// Whether a flight from `p` along `d` may reach the clock `end` from the
+// clock bound `bound` (`collision_tail`'s test): the medium's largest
+// majorant times the chord first, the cells' majorants where that says it
+// might.
+fn tail_may_reach(p: vec3<f32>, d: vec3<f32>, bound: f32, end: f32) -> bool {
+    let clip = medium_clip(p, d);
+    if !clip.hit {
+        return false;
+    }
+    if bound + walk_majorant_peak * (clip.t1 - clip.t0) < end {
+        return false;
+    }
+    return bound + majorant_depth(p, d, clip.t0, clip.t1) >= end;
+}
+
+// The rest of a walk that sums its terms, from the collision `at` on, by
+// the collision estimator (`Walks::collision_tail`): each flight read once
+// at the collision that ends it, `(1/s*) W (σ_g/σ_t) (S₁/b)` there, the
+// second flight with its factor, the own flight with the other; no clock.
+// Its flights, directions and roulette draw from a stream of their own,
+// started from `rng`. The clock's bound grows by the medium's largest
+// majorant times each own flight's length; where a collision's flights
+// may reach the series' end `(N + ½) s*`, the tail walks its path again
+// from `at` on the same stream, reading nothing and marching the clock
+// over its own flights, and returns that collision with the exact clock
+// (`back`); otherwise it returns with `back` false when the walk ends.
+// One loop, one flight per iteration of its inner two (the second
+// flight, then the own), so that the shader holds one more tracking loop.
+fn collision_tail(
+    at: TailState,
+    settings: GateSettings,
+    rho_z: f32,
+    rng: ptr<function, Rng>,
+    out: ptr<function, GateTerms>,
+) -> TailState {
+    let s_star = max(settings.s_star, 1e-12);
+    let sigma_t = scene.medium.sigma_t;
+    let sigma_g = max_element(sigma_t);
+    // `σ_g/(σ_t s*)` per channel, zero where a channel has no extinction.
+    var per_gate = vec3<f32>(0.0);
+    for (var c = 0; c < 3; c++) {
+        if sigma_t[c] > 0.0 {
+            per_gate[c] = sigma_g / (sigma_t[c] * s_star);
+        }
+    }
+    let end = (f32(settings.n_terms) + 0.5) * s_star;
+    let k = min(u32(floor(at.clock / s_star)) + 1u, settings.n_terms);
+    let path_start = pcg_hash(rng_next_u32(rng));
+    var path = Rng(path_start);
+    var state = at;
+    var bound = at.clock;
+    var steps = 0u;
+    var replay = false;
+    var replay_to = 0u;
+    var clock = at.clock;
+    loop {
+        if replay && steps == replay_to {
+            state.clock = clock;
+            state.back = true;
+            return state;
+        }
+        if !replay {
+            var near = tail_may_reach(state.origin, state.dir, bound, end);
+            if state.second.valid {
+                near = near || tail_may_reach(state.origin, state.second.dir, bound, end);
+            }
+            if near {
+                replay = true;
+                replay_to = steps;
+                steps = 0u;
+                state = at;
+                path = Rng(path_start);
+                clock = at.clock;
+                continue;
+            }
+        }
+        var own_hit = false;
+        for (var f = 0u; f < 2u; f++) {
+            let second_flight_now = f == 0u;
+            var d = state.dir;
+            var w = state.weight;
+            var flies = true;
+            if second_flight_now {
+                flies = state.second.valid;
+                d = state.second.dir;
+                w = state.weight * state.second.factor;
+            }
+            let clip = medium_clip(state.origin, d);
+            flies = flies && clip.hit;
+            if flies {
+                let flight = free_flight(state.origin, d, clip.t0, clip.t1, &w, &path);
+                if second_flight_now {
+                    if flight.hit && !replay {
+                        let at_hit = state.origin + d * flight.t;
+                        gate_add(k, w * per_gate, at_hit, -d, true, settings, 1u, rho_z, rng, out);
+                    }
+                } else {
+                    state.weight = w;
+                    if flight.hit {
+                        own_hit = true;
+                        if replay {
+                            let m = march_clock(
+                                CLOCK_OPTICAL_DEPTH, settings.s_star, state.origin, d, clip.t0, clip.t1, flight.t, BIG,
+                            );
+                            if !m.reached {
+                                clock += m.value;
+                            }
+                        } else {
+                            bound += walk_majorant_peak * (flight.t - clip.t0);
+                        }
+                        var own_factor = 1.0;
+                        if state.second.valid {
+                            own_factor = state.second.own_factor;
+                        }
+                        state.origin += d * flight.t;
+                        if !replay {
+                            gate_add(k, w * own_factor * per_gate, state.origin, -d, true, settings, 1u, rho_z, rng, out);
+                        }
+                    }
+                }
+            }
+        }
+        state.back = false;
+        if !own_hit {
+            return state;
+        }
+        state.weight *= scene.medium.albedo;
+        state.collisions += 1u;
+        if state.collisions >= MAX_COLLISIONS_GUARD {
+            return state;
+        }
+        // (Through a plain variable: naga 30 writes no SPIR-V for a pointer
+        // to a field of a local struct passed to a function.)
+        var survivor = state.weight;
+        if state.collisions >= settings.rr_start && !roulette(&survivor, &path) {
+            return state;
+        }
+        state.weight = survivor;
+        let u1 = rng_next_f32(&path);
+        let u2 = rng_next_f32(&path);
+        let incoming = state.dir;
+        let seconds = scene.medium.g >= SECOND_FLIGHT_MIN_G;
+        if state.collisions <= GUIDED_COLLISIONS && !seconds {
+            let next_dir = guided_direction(scene.medium.g, state.origin, incoming, u1, u2, &path);
+            state.dir = next_dir.dir;
+            state.weight *= next_dir.factor;
+        } else {
+            state.dir = sample_hg(scene.medium.g, incoming, u1, u2);
+        }
+        state.second.valid = false;
+        if seconds {
+            let u = rng_next_f32(&path);
+            let v1 = rng_next_f32(&path);
+            let v2 = rng_next_f32(&path);
+            state.second = second_flight(state.origin, incoming, state.dir, u, v1, v2);
+        }
+        steps += 1u;
+    }
+    // Unreachable: the loop only returns.
+    return state;
+}
+
 // Adds one walk's estimate of `Ĵ_k(z, n)`, `k = first..=N`, to `out`
 // (`accumulate_j_from`, with the walk of `walk` inlined): a backward walk
 // from `z` along `−n` by spectral tracking, albedo and Russian roulette at
@@ -604,18 +806,44 @@ fn accumulate_j_from(
                 dir = sample_hg(scene.medium.g, dir, u1, u2);
             }
             own_factor = 1.0;
+            var second: SecondFlight;
+            second.valid = false;
             if seconds {
                 let u = rng_next_f32(rng);
                 let v1 = rng_next_f32(rng);
                 let v2 = rng_next_f32(rng);
-                let second = second_flight(origin, incoming, dir, u, v1, v2);
-                if second.valid {
-                    own_factor = second.own_factor;
-                    own = OwnFlight(origin, dir, weight, next, clock_at_origin);
-                    in_second = true;
-                    dir = second.dir;
-                    weight *= second.factor;
+                second = second_flight(origin, incoming, dir, u, v1, v2);
+            }
+            if walk_sums_terms && !geometric && collisions >= COLLISION_TAIL_AFTER {
+                let back = collision_tail(
+                    TailState(origin, dir, weight, second, clock_at_origin, collisions, false),
+                    settings,
+                    rho_z,
+                    rng,
+                    out,
+                );
+                if !back.back {
+                    return;
                 }
+                // The series' end is near: the gates take the walk over
+                // again from the collision the tail stopped at.
+                next = u32(floor(back.clock / s_star)) + 1u;
+                if next > last {
+                    return;
+                }
+                origin = back.origin;
+                dir = back.dir;
+                weight = back.weight;
+                collisions = back.collisions;
+                clock_at_origin = back.clock;
+                second = back.second;
+            }
+            if second.valid {
+                own_factor = second.own_factor;
+                own = OwnFlight(origin, dir, weight, next, clock_at_origin);
+                in_second = true;
+                dir = second.dir;
+                weight *= second.factor;
             }
         } else {
             // No gate before the exit: the walk (or its second flight) left

@@ -66,7 +66,8 @@ struct WalkParams {
     view_walks: u32,
     // Phase walks per light, after the view walks.
     phase_walks: u32,
-    _pad0: u32,
+    // The medium's largest extinction majorant (`majorant_peak`).
+    majorant_peak: f32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -159,8 +160,13 @@ fn walk_lights(
             n = sample_hg(scene.medium.g, eye_direction(x), u1, u2);
         }
         let settings = GateSettings(wp.s_star, wp.n_terms, wp.clock, wp.rr_start);
-        // The walks towards the eye keep only the collided part.
+        // The walks towards the eye keep only the collided part; they and
+        // the phase walks sum the terms, so they read their collision
+        // tails where those pay (`collision_tail`, `COLLISION_TAIL_MIN_G`).
         walk_collided_only = towards_eye;
+        walk_sums_terms = (towards_eye || phase_turned)
+            && abs(scene.medium.g) >= COLLISION_TAIL_MIN_G;
+        walk_majorant_peak = wp.majorant_peak;
         accumulate_j_from(x, n, settings, 1u, &walk_rng, &per_walk);
     }
     // Asked once the walk is done (accumulate.wgsl): whether the driver

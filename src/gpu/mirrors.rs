@@ -356,9 +356,11 @@ pub struct GpuWalkParams {
     /// Phase walks per light (`sources::phase_walks`), after the view
     /// walks.
     pub phase_walks: u32,
+    /// The largest extinction majorant of the medium
+    /// (`MajorantGrid::peak`), which bounds the clock of a collision
+    /// tail's flights (`Walks::collision_tail`).
+    pub majorant_peak: f32,
     /// Padding to a multiple of 16 bytes.
-    pub _pad0: u32,
-    /// Padding.
     pub _pad1: u32,
     /// Padding.
     pub _pad2: u32,

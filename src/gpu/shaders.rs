@@ -210,6 +210,8 @@ pub const WGSL_CONSTANTS: &[WgslConst] = &[
     shared!(F32, COLLISION_FLOOR in crate::physics::internal::chances),
     shared!(F32, COLLISION_DEPTH in crate::physics::internal::chances),
     shared!(U32, GUIDED_COLLISIONS in crate::physics::internal::guiding),
+    shared!(U32, COLLISION_TAIL_AFTER in crate::physics::internal::walk),
+    shared!(F32, COLLISION_TAIL_MIN_G in crate::physics::internal::walk),
     shared!(F32, GUIDE_PROBABILITY in crate::physics::internal::guiding),
     shared!(F32, GUIDE_G in crate::physics::internal::guiding),
     shared!(F32, SECOND_FLIGHT_MIN_G in crate::physics::internal::guiding),

@@ -421,7 +421,7 @@ fn walk(
         eye: params.eye.to_array(),
         view_walks: params.view_walks,
         phase_walks: phase,
-        _pad0: 0,
+        majorant_peak: prepared.volume.majorants.peak,
         _pad1: 0,
         _pad2: 0,
     };

@@ -21,6 +21,9 @@ pub struct MajorantGrid {
     pub values: Vec<f32>,
     /// The extent of one cell, `(max − min) / res`.
     pub cell: Vec3,
+    /// The largest majorant of all cells ([`MajorantGrid::max_value`]),
+    /// kept for bounds taken per flight.
+    pub peak: f32,
 }
 
 impl MajorantGrid {
@@ -44,18 +47,20 @@ impl MajorantGrid {
                 }
             }
         }
+        let peak = values.iter().copied().fold(0.0, f32::max);
         Self {
             res,
             min,
             max,
             values,
             cell,
+            peak,
         }
     }
 
     /// The largest majorant of all cells.
     pub fn max_value(&self) -> f32 {
-        self.values.iter().copied().fold(0.0, f32::max)
+        self.peak
     }
 
     /// Walks the cells that the ray `origin + t dir` crosses within

@@ -99,6 +99,13 @@ use crate::physics::volume::{DensityField, Volume};
 /// generated from it).
 pub const WALK_STREAM: u32 = 0x7761_6c6b;
 
+/// The stream of a light's walks towards the eye and its phase walks on the
+/// CPU, `(seed, light, EYE_WALK_STREAM)`: apart from its spread walks', so
+/// that how those walks draw their numbers (the collision tail's, for
+/// one) leaves the harmonics' numbers as they were. (The GPU gives every
+/// walk a stream of its own.)
+pub const EYE_WALK_STREAM: u32 = WALK_STREAM - 1;
+
 /// Stream index of the sky's light arriving at each internal light
 /// ([`sky_arrival`]; CPU only, for both backends' light sets).
 pub const SKY_STREAM: u32 = 0x736b_7921;
@@ -241,10 +248,15 @@ pub fn phase_walks(params: &InternalParams, g: f32) -> u32 {
 /// spread walks `K` ([`walk_split`]).
 pub const SPREAD_WALKS_KEPT_WITH_PHASE_WALKS: u32 = 4;
 
-/// Spread walks one walk towards the eye (with its share of a phase walk)
-/// costs on the thick cumulus ([`walk_split`]): twelve spread walks took
-/// as long as eight walks towards the eye and their two phase walks
-/// (validation §3.21).
+/// Spread walks given up for one more walk towards the eye (with its
+/// share of a phase walk) in [`walk_split`]: what one cost on the thick
+/// cumulus when the split was made, twelve spread walks taking as long as
+/// eight walks towards the eye and their two phase walks (validation
+/// §3.21). Since collision tails (method §5.4) a walk towards the eye
+/// costs about half of that, but giving the walks towards the eye that
+/// time (32 of them instead of 24) read worse at equal time: the
+/// cumulus's 8×8 blocks at 8 s 6.71 → 7.39 %, per pixel 16.29 → 17.39 %
+/// (12 renders, validation §3.22). So the split stays.
 pub const SPREAD_WALKS_PER_VIEW_WALK: f32 = 1.5;
 
 /// How a light's walks are split, `(K, K_v)`, for `walks` spread walks and
@@ -260,7 +272,8 @@ pub const SPREAD_WALKS_PER_VIEW_WALK: f32 = 1.5;
 /// walks, [`phase_walks`], follow): the presets' 16 and 16 become 4 and
 /// 24, a set of about the same cost whose image is less noisy (the
 /// thick cumulus at 8 s: 8×8 blocks 9.96 → 8.98 %, per pixel 22.2 →
-/// 20.6 %, validation §3.21).
+/// 20.6 %, validation §3.21; measured before collision tails, which
+/// halved the cost of the walks towards the eye).
 /// Elsewhere the harmonics serve `L₁` and the split is as asked.
 pub fn walk_split(walks: u32, view_walks: u32, g: f32) -> (u32, u32) {
     if view_walks == 0 || g.abs() < PHASE_WALKS_MIN_G {
@@ -907,6 +920,7 @@ impl InternalLights {
                     .then(|| (params.eye - x).try_normalize().unwrap_or(Vec3::Z));
                 Walked {
                     rng,
+                    eye_rng: Rng::for_sample(params.seed, i as u32, EYE_WALK_STREAM),
                     rotation,
                     phi0,
                     to_eye,
@@ -969,10 +983,10 @@ impl InternalLights {
                         );
                     }
                     if let Some(n) = state.to_eye.filter(|_| towards_eye) {
-                        state.view += walker.accumulate_collided(x, n, &mut state.rng);
+                        state.view += walker.accumulate_collided(x, n, &mut state.eye_rng);
                     }
                     if let Some(n) = state.to_eye.filter(|_| phase_turned) {
-                        state.phase += phase_walk(&walker, x, n, &mut state.rng, per_walk);
+                        state.phase += phase_walk(&walker, x, n, &mut state.eye_rng);
                     }
                 },
             );
@@ -1354,6 +1368,9 @@ pub const GOLDEN_ANGLE: f32 = 2.399_963;
 /// walks them in rounds, and its random stream between rounds.
 struct Walked {
     rng: Rng,
+    /// The stream of the walks towards the eye and the phase walks
+    /// ([`EYE_WALK_STREAM`]).
+    eye_rng: Rng,
     /// The lattice's random rotation and azimuth offset.
     rotation: glam::Quat,
     phi0: f32,
@@ -1384,27 +1401,19 @@ fn lattice_direction(w: u32, walks: u32, rotation: glam::Quat, phi0: f32) -> Vec
     rotation * Vec3::new(s * phi.cos(), s * phi.sin(), z)
 }
 
+/// One phase walk from `x` ([`phase_walks`]): the direction towards the
+/// eye `n` turned by one draw of the phase function, and all of
+/// `Σ_{k≥1} J_k` there ([`Walks::accumulate_sum`]).
+fn phase_walk<D: DensityField>(walker: &Walks<'_, D>, x: Vec3, n: Vec3, rng: &mut Rng) -> Vec3 {
+    let turned =
+        crate::physics::phase::sample_hg(walker.vol.optics.g, n, rng.next_f32(), rng.next_f32());
+    walker.accumulate_sum(x, turned, rng)
+}
+
 /// Walks from `x` (its volume weight `weight`) in direction `n` and adds
 /// the walk to the light's sums, unweighted: `F` (term 1), `Σ J_k` and its
 /// collided part projected on the harmonics of `order`, and the terms'
 /// energies (`per_walk` and `unscattered` are scratch, one slot per term).
-/// One phase walk from `x` ([`phase_walks`]): the direction towards the
-/// eye `n` turned by one draw of the phase function, and all of
-/// `Σ_{k≥1} J_k` there (`per_walk` is scratch of the gates' slots).
-fn phase_walk<D: DensityField>(
-    walker: &Walks<'_, D>,
-    x: Vec3,
-    n: Vec3,
-    rng: &mut Rng,
-    per_walk: &mut [Vec3],
-) -> Vec3 {
-    let turned =
-        crate::physics::phase::sample_hg(walker.vol.optics.g, n, rng.next_f32(), rng.next_f32());
-    per_walk.iter_mut().for_each(|v| *v = Vec3::ZERO);
-    walker.accumulate_j_from(x, turned, 1, rng, per_walk, None);
-    per_walk[1..].iter().sum()
-}
-
 fn walk_direction<D: DensityField>(
     walker: &Walks<'_, D>,
     (x, n, weight): (Vec3, Vec3, f32),
