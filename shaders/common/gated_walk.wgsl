@@ -403,17 +403,9 @@ fn second_flight(
     if !clip.hit {
         return none;
     }
-    var it = dda_start(p, towards, clip.t0, min(clip.t1, light.distance));
-    var depth = 0.0;
-    loop {
-        let seg = dda_next(&it);
-        if !seg.valid {
-            break;
-        }
-        depth += seg.majorant * (seg.t1 - seg.t0);
-        if depth >= SECOND_FLIGHT_MAX_DEPTH {
-            return none;
-        }
+    let depth = majorant_depth(p, towards, clip.t0, min(clip.t1, light.distance), SECOND_FLIGHT_MAX_DEPTH);
+    if depth >= SECOND_FLIGHT_MAX_DEPTH {
+        return none;
     }
     let g = scene.medium.g;
     let second = sample_hg(g, towards, u1, u2);
@@ -486,21 +478,6 @@ struct TailState {
     back: bool,
 }
 
-// The majorant optical depth from `origin` along `dir` over `[t0, t1]`
-// (`majorant_depth`): an upper bound of the clock over a flight there.
-fn majorant_depth(origin: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32) -> f32 {
-    var it = dda_start(origin, dir, t0, t1);
-    var depth = 0.0;
-    loop {
-        let seg = dda_next(&it);
-        if !seg.valid {
-            break;
-        }
-        depth += seg.majorant * (seg.t1 - seg.t0);
-    }
-    return depth;
-}
-
 // Whether a flight from `p` along `d` may reach the clock `end` from the
 // clock bound `bound` (`collision_tail`'s test): the medium's largest
 // majorant times the chord first, the cells' majorants where that says it
@@ -513,7 +490,7 @@ fn tail_may_reach(p: vec3<f32>, d: vec3<f32>, bound: f32, end: f32) -> bool {
     if bound + walk_majorant_peak * (clip.t1 - clip.t0) < end {
         return false;
     }
-    return bound + majorant_depth(p, d, clip.t0, clip.t1) >= end;
+    return bound + majorant_depth(p, d, clip.t0, clip.t1, end - bound) >= end;
 }
 
 // The rest of a walk that sums its terms, from the collision `at` on, by

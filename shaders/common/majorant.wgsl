@@ -93,3 +93,19 @@ fn dda_next(it: ptr<function, DdaIterator>) -> MajorantSegment {
     // Unreachable: the loop only returns.
     return MajorantSegment(0.0, 0.0, 0.0, false);
 }
+
+// The majorant optical depth along `origin + t dir` over `[t0, t1]`,
+// summed cell by cell until it reaches `cap` (then some value ≥ `cap`):
+// `MajorantGrid::depth`.
+fn majorant_depth(origin: vec3<f32>, dir: vec3<f32>, t0: f32, t1: f32, cap: f32) -> f32 {
+    var it = dda_start(origin, dir, t0, t1);
+    var depth = 0.0;
+    loop {
+        let seg = dda_next(&it);
+        if !seg.valid || depth >= cap {
+            break;
+        }
+        depth += seg.majorant * (seg.t1 - seg.t0);
+    }
+    return depth;
+}

@@ -63,6 +63,19 @@ impl MajorantGrid {
         self.peak
     }
 
+    /// The majorant optical depth along `origin + t dir` over `[t_min,
+    /// t_max]` (already clipped to the grid's box), summed cell by cell
+    /// until it reaches `cap` (then some value `≥ cap`): an upper bound of
+    /// the optical depth there, without a density lookup.
+    pub fn depth(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, cap: f32) -> f32 {
+        let mut depth = 0.0f32;
+        self.walk(origin, dir, t_min, t_max, |a, b, m| {
+            depth += m * (b - a);
+            depth < cap
+        });
+        depth
+    }
+
     /// Walks the cells that the ray `origin + t dir` crosses within
     /// `[t_min, t_max]` (already clipped to the grid's box), calling
     /// `segment(t_enter, t_exit, majorant)` in order; stops early when it

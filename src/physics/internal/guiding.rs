@@ -213,18 +213,14 @@ pub fn second_flight<D: DensityField>(
     let light = light_by_irradiance(lights, p, total, u)?;
     let towards = -light.travel;
     let (t_enter, t_exit) = vol.clip(p, towards)?;
-    let mut depth = 0.0f32;
-    let reaches = vol.majorants.walk(
+    let depth = vol.majorants.depth(
         p,
         towards,
         t_enter,
         t_exit.min(light.distance),
-        |a, b, m| {
-            depth += m * (b - a);
-            depth < SECOND_FLIGHT_MAX_DEPTH
-        },
+        SECOND_FLIGHT_MAX_DEPTH,
     );
-    if !reaches {
+    if depth >= SECOND_FLIGHT_MAX_DEPTH {
         return None;
     }
     let g = vol.optics.g;

@@ -518,22 +518,6 @@ struct TailStep {
     ended: bool,
 }
 
-/// The majorant optical depth from `origin` along `dir` over `[t_enter,
-/// t_exit]`: an upper bound of the clock's advance over any flight there.
-fn majorant_depth<D: DensityField>(
-    vol: &Volume<D>,
-    origin: Vec3,
-    dir: Vec3,
-    (t_enter, t_exit): (f32, f32),
-) -> f32 {
-    let mut depth = 0.0f32;
-    vol.majorants.walk(origin, dir, t_enter, t_exit, |a, b, m| {
-        depth += m * (b - a);
-        true
-    });
-    depth
-}
-
 /// A walk's own state at a collision, kept while the collision's second
 /// flight ([`second_flight`]) runs.
 struct Resume {
@@ -625,7 +609,7 @@ impl<D: DensityField> Walks<'_, D> {
                     if bound + crude < end {
                         crude
                     } else {
-                        majorant_depth(vol, state.origin, d, (a, b))
+                        vol.majorants.depth(state.origin, d, a, b, end - bound)
                     }
                 })
             };
