@@ -235,7 +235,7 @@ var<private> walk_unscattered: vec3<f32>;
 var<private> walk_collided_only: bool;
 
 // When true, a walk on the optical-depth clock reads the rest of its path
-// at its collisions after `COLLISION_TAIL_AFTER` of them (`collision_tail`):
+// once per flight after `COLLISION_TAIL_AFTER` collisions (`collision_tail`):
 // the walks towards the eye and the phase walks, whose callers sum the
 // terms, in a medium of `|g|` ≥ `COLLISION_TAIL_MIN_G`. Set per walk by the
 // caller, with `walk_majorant_peak`, the medium's largest extinction
@@ -493,12 +493,14 @@ fn tail_may_reach(p: vec3<f32>, d: vec3<f32>, bound: f32, end: f32) -> bool {
     return bound + majorant_depth(p, d, clip.t0, clip.t1, end - bound) >= end;
 }
 
-// The rest of a walk that sums its terms, from the collision `at` on, by
-// the collision estimator (`Walks::collision_tail`): each flight read once
-// at the collision that ends it, `(1/s*) W (σ_g/σ_t) (S₁/b)` there, the
-// second flight with its factor, the own flight with the other; no clock.
-// Its flights, directions and roulette draw from a stream of their own,
-// started from `rng`. The clock's bound grows by the medium's largest
+// The rest of a walk that sums its terms, from the collision `at` on, by a
+// track-length estimator with one reading per flight
+// (`Walks::collision_tail`): each flight read once, at one of its
+// tentative collisions drawn `∝ σ_g ρ/m̄` (`free_flight_probed`),
+// `(1/s*) W Σ(σ_g ρ/m̄) (S₁/b)` there, also the last flight that leaves the
+// medium; the second flight with its factor, the own flight with the
+// other; no clock. Its flights, directions and roulette draw from a stream
+// of their own, started from `rng`; the probes from `rng` itself. The clock's bound grows by the medium's largest
 // majorant times each own flight's length; where a collision's flights
 // may reach the series' end `(N + ½) s*`, the tail walks its path again
 // from `at` on the same stream, reading nothing and marching the clock
@@ -514,15 +516,7 @@ fn collision_tail(
     out: ptr<function, GateTerms>,
 ) -> TailState {
     let s_star = max(settings.s_star, 1e-12);
-    let sigma_t = scene.medium.sigma_t;
-    let sigma_g = max_element(sigma_t);
-    // `σ_g/(σ_t s*)` per channel, zero where a channel has no extinction.
-    var per_gate = vec3<f32>(0.0);
-    for (var c = 0; c < 3; c++) {
-        if sigma_t[c] > 0.0 {
-            per_gate[c] = sigma_g / (sigma_t[c] * s_star);
-        }
-    }
+    let per_gate = 1.0 / s_star;
     let end = (f32(settings.n_terms) + 0.5) * s_star;
     let k = min(u32(floor(at.clock / s_star)) + 1u, settings.n_terms);
     let path_start = pcg_hash(rng_next_u32(rng));
@@ -568,13 +562,17 @@ fn collision_tail(
             let clip = medium_clip(state.origin, d);
             flies = flies && clip.hit;
             if flies {
-                let flight = free_flight(state.origin, d, clip.t0, clip.t1, &w, &path);
-                if second_flight_now {
-                    if flight.hit && !replay {
-                        let at_hit = state.origin + d * flight.t;
-                        gate_add(k, w * per_gate, at_hit, -d, true, settings, 1u, rho_z, rng, out);
-                    }
-                } else {
+                let flight = free_flight_probed(state.origin, d, clip.t0, clip.t1, &w, &path, rng);
+                var own_factor = 1.0;
+                if !second_flight_now && state.second.valid {
+                    own_factor = state.second.own_factor;
+                }
+                if flight.probed && !replay {
+                    let at_probe = state.origin + d * flight.probe_t;
+                    let w_read = flight.probe_w * (own_factor * flight.depth * per_gate);
+                    gate_add(k, w_read, at_probe, -d, true, settings, 1u, rho_z, rng, out);
+                }
+                if !second_flight_now {
                     state.weight = w;
                     if flight.hit {
                         own_hit = true;
@@ -588,14 +586,7 @@ fn collision_tail(
                         } else {
                             bound += walk_majorant_peak * (flight.t - clip.t0);
                         }
-                        var own_factor = 1.0;
-                        if state.second.valid {
-                            own_factor = state.second.own_factor;
-                        }
                         state.origin += d * flight.t;
-                        if !replay {
-                            gate_add(k, w * own_factor * per_gate, state.origin, -d, true, settings, 1u, rho_z, rng, out);
-                        }
                     }
                 }
             }

@@ -167,6 +167,71 @@ fn free_flight(
     return FreeFlight(0.0, false);
 }
 
+// A free flight and one of its tentative collisions drawn for a
+// track-length reading (`ProbedFlight`): the real collision at `t` if
+// `hit`; the probe at `probe_t` with the weight on arriving there if
+// `probed`; `depth`, the sum of `σ_g ρ/m̄` over the tentative collisions.
+struct ProbedFlight {
+    t: f32,
+    hit: bool,
+    probe_t: f32,
+    probe_w: vec3<f32>,
+    probed: bool,
+    depth: f32,
+}
+
+// `free_flight` that also draws one of its tentative collisions (the real
+// one included), each with a chance proportional to `σ_g ρ/m̄` there, from
+// `pick`, a stream apart from the flight's (`free_flight_probed`): the
+// probe's reading times `depth`, with the weight on arriving, estimates
+// `∫ W σ_g ρ f dt` over the track.
+fn free_flight_probed(
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    t0: f32,
+    t1: f32,
+    weight: ptr<function, vec3<f32>>,
+    rng: ptr<function, Rng>,
+    pick: ptr<function, Rng>,
+) -> ProbedFlight {
+    var f = ProbedFlight(0.0, false, 0.0, vec3<f32>(0.0), false, 0.0);
+    var s = sample_tentative_start(origin, dir, t0, t1, rng);
+    loop {
+        let c = sample_tentative_next(&s, rng);
+        if !c.found {
+            return f;
+        }
+        let m = c.majorant;
+        let sigma_t = medium_sigma_t(origin + dir * c.t);
+        let share = max_element(sigma_t) / m;
+        if share > 0.0 {
+            f.depth += share;
+            if rng_next_f32(pick) * f.depth < share {
+                f.probe_t = c.t;
+                f.probe_w = *weight;
+                f.probed = true;
+            }
+        }
+        let sigma_n = max(vec3<f32>(m) - sigma_t, vec3<f32>(0.0));
+        let p_real = max_element(*weight * sigma_t);
+        let p_null = max_element(*weight * sigma_n);
+        let total = p_real + p_null;
+        if total <= 0.0 {
+            *weight = vec3<f32>(0.0);
+            return f;
+        }
+        if rng_next_f32(rng) * total < p_real {
+            *weight *= sigma_t * (total / (m * p_real));
+            f.t = c.t;
+            f.hit = true;
+            return f;
+        }
+        *weight *= sigma_n * (total / (m * p_null));
+    }
+    // Unreachable: the loop only returns.
+    return f;
+}
+
 // Ratio-tracking estimate of the transmittance from `origin` along `dir` up
 // to distance `t_max` (clipped to the medium), per channel
 // (`transmittance`).

@@ -196,6 +196,69 @@ pub fn free_flight<D: DensityField>(
     hit
 }
 
+/// A free flight ([`free_flight_probed`]) and one point of its track,
+/// drawn for a track-length reading.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProbedFlight {
+    /// The distance of the real collision that ended the flight, if any.
+    pub hit: Option<f32>,
+    /// The probe: its distance and the flight's weight on arriving there,
+    /// or `None` where the flight met no tentative collision.
+    pub probe: Option<(f32, Vec3)>,
+    /// `Σ σ_g ρ/m̄` over the flight's tentative collisions (the real one
+    /// included): the probe's reading times this, with the weight on
+    /// arriving, estimates `∫ W σ_g ρ f dt` over the track.
+    pub depth: f32,
+}
+
+/// [`free_flight`] that also draws one of its tentative collisions (the
+/// real one included), each with a chance proportional to `σ_g ρ/m̄` there
+/// (`σ_g ρ` the largest channel of the extinction, `m̄` the majorant), from
+/// `pick` — a stream apart from the flight's own, so the flight comes out
+/// the same. The tentative collisions are a Poisson process of rate `m̄`
+/// along the track and a reading taken on arriving at each does not see
+/// the choice made there, so `Σ_i W_i (σ_g ρ_i/m̄_i) f(x_i)` over them has
+/// the expectation `∫ T σ_g ρ f dt` over the track (per channel, `T` the
+/// transmittance); the probe's `W f` times [`ProbedFlight::depth`] is an
+/// unbiased estimate of that sum — a track-length estimator with one
+/// reading, which unlike a reading at the collision also reads a flight
+/// that leaves the medium.
+#[inline]
+pub fn free_flight_probed<D: DensityField>(
+    vol: &Volume<D>,
+    origin: Vec3,
+    dir: Vec3,
+    (t0, t1): (f32, f32),
+    weight: &mut Vec3,
+    rng: &mut Rng,
+    pick: &mut Rng,
+) -> ProbedFlight {
+    let mut flight = ProbedFlight {
+        hit: None,
+        probe: None,
+        depth: 0.0,
+    };
+    sample_tentative(&vol.majorants, origin, dir, t0, t1, rng, |t, m, rng| {
+        let sigma_t = vol.sigma_t(origin + dir * t);
+        let c = sigma_t.max_element() / m;
+        if c > 0.0 {
+            flight.depth += c;
+            if pick.next_f32() * flight.depth < c {
+                flight.probe = Some((t, *weight));
+            }
+        }
+        match spectral_event_with(sigma_t, m, weight, rng) {
+            TentativeEvent::Real => {
+                flight.hit = Some(t);
+                false
+            }
+            TentativeEvent::Null => true,
+            TentativeEvent::Dead => false,
+        }
+    });
+    flight
+}
+
 /// What spectral tracking made of a tentative collision.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TentativeEvent {
@@ -218,7 +281,18 @@ pub fn spectral_event<D: DensityField>(
     weight: &mut Vec3,
     rng: &mut Rng,
 ) -> TentativeEvent {
-    let sigma_t = vol.sigma_t(p);
+    spectral_event_with(vol.sigma_t(p), m, weight, rng)
+}
+
+/// [`spectral_event`] with the extinction `sigma_t` at the tentative
+/// collision already looked up.
+#[inline]
+pub fn spectral_event_with(
+    sigma_t: Vec3,
+    m: f32,
+    weight: &mut Vec3,
+    rng: &mut Rng,
+) -> TentativeEvent {
     let sigma_n = (Vec3::splat(m) - sigma_t).max(Vec3::ZERO);
     let p_real = (*weight * sigma_t).max_element();
     let p_null = (*weight * sigma_n).max_element();
@@ -597,6 +671,77 @@ mod tests {
             },
             8,
         )
+    }
+
+    /// [`free_flight_probed`]'s probe, its weight on arriving times
+    /// `Σ σ_g ρ/m̄` times a function `f` read there, estimates
+    /// `∫ T σ_g ρ f dt` over the flight's track per channel — on a chord of
+    /// a chromatic sphere whose edge cells hold null collisions where the
+    /// density is zero, with `f` growing along the chord; the flight itself
+    /// (its collision and weight) is `free_flight`'s on the same stream.
+    #[test]
+    fn probed_flights_read_the_track_length_integral() {
+        let sigma = Vec3::new(0.5, 1.0, 2.0);
+        let vol = ball(sigma);
+        let (origin, dir) = (Vec3::new(-2.0, 0.3, 0.1), Vec3::X);
+        let span = vol.clip(origin, dir).unwrap();
+        let half = (1.0f64 - 0.09 - 0.01).sqrt();
+        let t_in = 2.0 - half;
+        let f = |t: f32| 1.0 + 0.5 * t;
+        // ∫ σ_g e^{−σ_c (t − t_in)} f(t) dt over the chord, by the midpoint
+        // rule.
+        let steps = 20_000;
+        let mut want = [0.0f64; 3];
+        for i in 0..steps {
+            let t = t_in + (i as f64 + 0.5) / steps as f64 * 2.0 * half;
+            for (c, w) in want.iter_mut().enumerate() {
+                let tr = (-f64::from(sigma[c]) * (t - t_in)).exp();
+                *w += 2.0 * tr * f64::from(f(t as f32)) * 2.0 * half / steps as f64;
+            }
+        }
+        let n = 400_000;
+        let (mut rng, mut pick) = (Rng::for_sample(9, 0, 0), Rng::for_sample(9, 1, 0));
+        let (mut sum, mut squares) = ([0.0f64; 3], [0.0f64; 3]);
+        let mut probed = 0;
+        for _ in 0..n {
+            let mut twin_rng = rng.clone();
+            let mut twin_w = Vec3::ONE;
+            let twin = free_flight(
+                &vol,
+                origin,
+                dir,
+                span.0,
+                span.1,
+                &mut twin_w,
+                &mut twin_rng,
+            );
+            let mut w = Vec3::ONE;
+            let flight = free_flight_probed(&vol, origin, dir, span, &mut w, &mut rng, &mut pick);
+            assert_eq!(flight.hit, twin);
+            assert_eq!(w, twin_w);
+            let mut v = Vec3::ZERO;
+            if let Some((t, w_probe)) = flight.probe {
+                assert!(t >= span.0 && t <= span.1 && flight.depth > 0.0);
+                v = w_probe * flight.depth * f(t);
+                probed += 1;
+            }
+            for c in 0..3 {
+                sum[c] += f64::from(v[c]);
+                squares[c] += f64::from(v[c]) * f64::from(v[c]);
+            }
+        }
+        for c in 0..3 {
+            let mean = sum[c] / n as f64;
+            let se = ((squares[c] / n as f64 - mean * mean) / n as f64).sqrt();
+            assert!(se < 0.01 * want[c], "ch {c}: se {se} of {}", want[c]);
+            assert!(
+                (mean - want[c]).abs() < 4.0 * se,
+                "ch {c}: {mean} against {} (se {se})",
+                want[c]
+            );
+        }
+        // Flights that left the sphere were read too.
+        assert!(probed > n * 9 / 10, "{probed} of {n} flights probed");
     }
 
     /// Ratio tracking through a homogeneous sphere matches `exp(−σ L)`

@@ -35,8 +35,8 @@
 //! function's forward peak is sharp, each collision also takes a second
 //! flight towards a light ([`super::guiding::second_flight`]). There, a
 //! walk whose caller sums its terms (the walks towards the eye and the
-//! phase walks) reads the rest of its path at its collisions after a few
-//! of them, without the clock ([`COLLISION_TAIL_AFTER`]).
+//! phase walks) reads the rest of its path once per flight after a few
+//! collisions, without the clock ([`COLLISION_TAIL_AFTER`]).
 
 use glam::Vec3;
 
@@ -49,7 +49,9 @@ use crate::physics::lights::Lights;
 use crate::physics::phase;
 use crate::physics::reference::{gate_scatter_source, roulette};
 use crate::physics::rng::{pcg_hash, Rng};
-use crate::physics::tracking::{free_flight, spectral_event, TentativeEvent, TentativeSteps};
+use crate::physics::tracking::{
+    free_flight, free_flight_probed, spectral_event, TentativeEvent, TentativeSteps,
+};
 use crate::physics::volume::{DensityField, Volume};
 
 /// Runs one backward walk from `z` along `−n` (`n`: the direction light
@@ -175,7 +177,7 @@ impl<'a, D: DensityField> Walks<'a, D> {
     /// gate's shadow ray and 1.61 s with these (three runs each).
     ///
     /// After [`COLLISION_TAIL_AFTER`] collisions the walk reads its source
-    /// at its collisions instead of its gates ([`COLLISION_TAIL_AFTER`]):
+    /// once per flight instead of at its gates ([`COLLISION_TAIL_AFTER`]):
     /// the same sum in expectation, without the clock's quadrature.
     pub fn accumulate_collided(&self, z: Vec3, n: Vec3, rng: &mut Rng) -> Vec3 {
         let mut sum = Vec3::ZERO;
@@ -185,8 +187,8 @@ impl<'a, D: DensityField> Walks<'a, D> {
 
     /// One walk's `Σ_{k≥1} Ĵ_k(z, n)`, the sum of what
     /// [`Walks::accumulate_j_from`] adds from term 1 on: what a phase walk
-    /// keeps. After [`COLLISION_TAIL_AFTER`] collisions it reads at its
-    /// collisions instead of its gates ([`COLLISION_TAIL_AFTER`]).
+    /// keeps. After [`COLLISION_TAIL_AFTER`] collisions it reads once per
+    /// flight instead of at its gates ([`COLLISION_TAIL_AFTER`]).
     pub fn accumulate_sum(&self, z: Vec3, n: Vec3, rng: &mut Rng) -> Vec3 {
         let mut sum = Vec3::ZERO;
         self.gate_sources(z, n, 1, false, true, rng, |_, v, _| sum += v);
@@ -237,7 +239,7 @@ impl<'a, D: DensityField> Walks<'a, D> {
             return;
         }
         // Only a caller that sums the terms may trade the gates for the
-        // collision estimator ([`Walks::collision_tail`]), only on the
+        // tail's one reading per flight ([`Walks::collision_tail`]), only on the
         // optical-depth clock, whose rate is the grey extinction, and only
         // where it pays ([`COLLISION_TAIL_MIN_G`]).
         let tail =
@@ -464,9 +466,9 @@ fn optical_depth_flight<D: DensityField>(
 
 /// Own collisions after which a walk that sums its terms
 /// ([`Walks::accumulate_collided`], [`Walks::accumulate_sum`]) reads its
-/// source once per flight, at the collision that ends it, instead of at
-/// its gates, and no longer marches the clock (method §5.4, "Collision
-/// tails"). The gates sit at whole windows of the clock from the walk's
+/// source once per flight, at one of the flight's tentative collisions
+/// ([`free_flight_probed`]), instead of at its gates, and no longer
+/// marches the clock (method §5.4, "Collision tails"). The gates sit at whole windows of the clock from the walk's
 /// start; a sum over them from a collision on equals the collision
 /// estimator's integral (divided by `s*`) only where the collision's clock
 /// falls evenly between two gates. After one collision it does not quite
@@ -507,7 +509,8 @@ struct TailState {
 
 /// What one collision of [`Walks::collision_tail`]'s path read and did
 /// ([`Walks::tail_step`]): the second flight's and the own flight's
-/// readings (weight, position, direction of flight), the own flight for
+/// readings (weight times `Σ σ_g ρ/m̄`, the probe's position, the direction
+/// of flight; [`free_flight_probed`]), the own flight for
 /// the clock's march and a bound of its clock (the medium's largest
 /// majorant times its length), and whether the walk ended.
 struct TailStep {
@@ -547,21 +550,27 @@ impl Resume {
 impl<D: DensityField> Walks<'_, D> {
     /// The rest of a walk that sums its terms (or their collided part),
     /// from a collision `at` (after [`COLLISION_TAIL_AFTER`] of them) on, by
-    /// the collision estimator instead of the gates.
+    /// a track-length estimator with one reading per flight instead of the
+    /// gates.
     ///
     /// On the optical-depth clock the gates read `W (S₁/b)` every `s*` of
     /// the clock `τ`, and their sum from a collision on is, in
     /// expectation, `(1/s*) ∫ W (S₁/b) dτ` over the rest of the walk (see
     /// [`COLLISION_TAIL_AFTER`] for why only after a few collisions). The
     /// clock's rate is the grey extinction `c_g = σ_g ρ`, `σ_g` the largest
-    /// channel of `σ_t`; spectral tracking puts real collisions at the
-    /// rate `σ_t ρ` per channel, its weight at one carrying the ratio, so
-    /// `(1/s*) Σ W (σ_g/σ_t) (S₁/b)` over the real collisions has that
-    /// expectation: each flight is read once, at the collision that ends
-    /// it, in the direction it flew — and the clock, a quadrature of about
-    /// eight density lookups per mean free path, is not needed. A second
-    /// flight ([`second_flight`]) is read at its own collision with its
-    /// factor, the walk's own flight with the other.
+    /// channel of `σ_t`, so over one flight that integral is
+    /// `(1/s*) ∫ W σ_g ρ (S₁/b) dt` along its track, which
+    /// [`free_flight_probed`] estimates with the flight's own tentative
+    /// collisions: one of them drawn with a chance `∝ σ_g ρ/m̄`, read there
+    /// in the direction of flight, times `Σ σ_g ρ/m̄` over them. Each flight
+    /// is read once — also the last one, which leaves the medium, where a
+    /// reading at real collisions would have read nothing (that collision
+    /// estimator, `(1/s*) W (σ_g/σ_t)(S₁/b)` at the collision ending each
+    /// flight, was 6–11 % noisier a light set on the clouds of `g` 0.85–0.95;
+    /// [validation §3.23](crate::doc::validation)) — and the clock, a
+    /// quadrature of about eight density lookups per mean free path, is not
+    /// needed. A second flight ([`second_flight`]) is read with its factor,
+    /// the walk's own flight with the other.
     ///
     /// The series ends at gate `N`, where the sum's integral ends at
     /// `(N + ½) s*`. The tail counts an upper bound of the clock (the
@@ -575,7 +584,8 @@ impl<D: DensityField> Walks<'_, D> {
     /// to go on from (`None`: the walk ended). Only walks that come near
     /// the series' end pay that, not the many that end long before it.
     /// `on_gate` receives the readings as gates whose weight carries
-    /// `(σ_g/σ_t)/s*`.
+    /// `Σ (σ_g ρ/m̄)/s*`; the probes are drawn from `rng`, the walk's stream,
+    /// so that they leave the path's stream alone.
     fn collision_tail(
         &self,
         at: TailState,
@@ -585,13 +595,7 @@ impl<D: DensityField> Walks<'_, D> {
     ) -> Option<TailState> {
         let (vol, settings) = (self.vol, &self.gates);
         let s_star = settings.s_star.max(1e-12);
-        let sigma_t = vol.optics.sigma_t;
-        let sigma_g = sigma_t.max_element();
-        let per_gate = Vec3::select(
-            sigma_t.cmpgt(Vec3::ZERO),
-            Vec3::splat(sigma_g) / (sigma_t * s_star),
-            Vec3::ZERO,
-        );
+        let per_gate = 1.0 / s_star;
         let end = (settings.n_terms as f32 + 0.5) * s_star;
         // The gate index the readings are reported under: the first gate
         // after the hand-over (the callers sum them).
@@ -618,13 +622,14 @@ impl<D: DensityField> Walks<'_, D> {
             if near {
                 return Some(self.replay_tail(at, steps, guide, Rng::from_state(path_start)));
             }
-            let step = self.tail_step(&mut state, guide, &mut path);
+            let step = self.tail_step(&mut state, guide, &mut path, rng);
             if let Some((w, p, d)) = step.second {
                 on_gate(k, w * per_gate, p, -d, true, rng);
             }
-            let (w, p, d) = step.own?;
+            if let Some((w, p, d)) = step.own {
+                on_gate(k, w * per_gate, p, -d, true, rng);
+            }
             bound += step.depth;
-            on_gate(k, w * per_gate, p, -d, true, rng);
             if step.ended {
                 return None;
             }
@@ -636,10 +641,18 @@ impl<D: DensityField> Walks<'_, D> {
     /// of the collision `state` is at, if it takes one, then the walk's own
     /// flight to its next collision and what happens there (the albedo,
     /// the roulette, the next direction and second flight), every choice
-    /// drawn from `path`. Returns what the two flights read at their
-    /// collisions — weight (the own flight's with its balance factor),
-    /// position, direction — and a bound of the own flight's clock.
-    fn tail_step(&self, state: &mut TailState, guide: Option<&Lights>, path: &mut Rng) -> TailStep {
+    /// drawn from `path`, the flights' probes from `pick`
+    /// ([`free_flight_probed`]). Returns what the two flights read — weight
+    /// (the own flight's with its balance factor), position, direction — and
+    /// a bound of the own flight's clock; the own flight is read also where
+    /// it leaves the medium and the walk ends.
+    fn tail_step(
+        &self,
+        state: &mut TailState,
+        guide: Option<&Lights>,
+        path: &mut Rng,
+        pick: &mut Rng,
+    ) -> TailStep {
         let (vol, settings) = (self.vol, &self.gates);
         let mut step = TailStep {
             second: None,
@@ -651,9 +664,9 @@ impl<D: DensityField> Walks<'_, D> {
         if let Some(s) = state.second {
             if let Some(span) = vol.clip(state.origin, s.dir) {
                 let mut w = state.weight * s.factor;
-                if let Some(t) = free_flight(vol, state.origin, s.dir, span.0, span.1, &mut w, path)
-                {
-                    step.second = Some((w, state.origin + s.dir * t, s.dir));
+                let f = free_flight_probed(vol, state.origin, s.dir, span, &mut w, path, pick);
+                if let Some((t, w)) = f.probe {
+                    step.second = Some((w * f.depth, state.origin + s.dir * t, s.dir));
                 }
             }
         }
@@ -661,16 +674,23 @@ impl<D: DensityField> Walks<'_, D> {
         let Some(span) = vol.clip(state.origin, state.dir) else {
             return step;
         };
-        let hit = free_flight(
+        let f = free_flight_probed(
             vol,
             state.origin,
             state.dir,
-            span.0,
-            span.1,
+            span,
             &mut state.weight,
             path,
+            pick,
         );
-        let Some(t_hit) = hit else {
+        if let Some((t, w)) = f.probe {
+            step.own = Some((
+                w * own_factor * f.depth,
+                state.origin + state.dir * t,
+                state.dir,
+            ));
+        }
+        let Some(t_hit) = f.hit else {
             return step;
         };
         let start = state.origin;
@@ -687,7 +707,6 @@ impl<D: DensityField> Walks<'_, D> {
         ));
         step.depth = vol.majorants.peak * (t_hit - span.0);
         state.origin += state.dir * t_hit;
-        step.own = Some((state.weight * own_factor, state.origin, state.dir));
         state.weight *= vol.optics.albedo;
         state.collisions += 1;
         if state.collisions >= settings.rr_start && !roulette(&mut state.weight, path) {
@@ -736,8 +755,9 @@ impl<D: DensityField> Walks<'_, D> {
     ) -> TailState {
         let mut state = at;
         let mut clock = at.clock;
+        let mut pick = Rng::from_state(0);
         for _ in 0..steps {
-            let step = self.tail_step(&mut state, guide, &mut path);
+            let step = self.tail_step(&mut state, guide, &mut path, &mut pick);
             if let Some((ray, t0, t1)) = step.flight {
                 if let ClockMarch::Exhausted(d) = march_clock(self.vol, &ray, t0, t1, f32::INFINITY)
                 {
