@@ -129,6 +129,33 @@ struct FreeFlight {
     hit: bool,
 }
 
+// What spectral tracking made of a tentative collision (`TentativeEvent`).
+const EVENT_REAL: u32 = 0u;
+const EVENT_NULL: u32 = 1u;
+const EVENT_DEAD: u32 = 2u;
+
+// Spectral tracking's choice at a tentative collision with extinction
+// `sigma_t` under the majorant `m` (`spectral_event_with`): real with
+// probability `p_real / (p_real + p_null)`, `weight` updated so that the
+// estimate stays unbiased per channel, or set to zero (`EVENT_DEAD`) where
+// the path can carry no more light.
+fn spectral_event(sigma_t: vec3<f32>, m: f32, weight: ptr<function, vec3<f32>>, rng: ptr<function, Rng>) -> u32 {
+    let sigma_n = max(vec3<f32>(m) - sigma_t, vec3<f32>(0.0));
+    let p_real = max_element(*weight * sigma_t);
+    let p_null = max_element(*weight * sigma_n);
+    let total = p_real + p_null;
+    if total <= 0.0 {
+        *weight = vec3<f32>(0.0);
+        return EVENT_DEAD;
+    }
+    if rng_next_f32(rng) * total < p_real {
+        *weight *= sigma_t * (total / (m * p_real));
+        return EVENT_REAL;
+    }
+    *weight *= sigma_n * (total / (m * p_null));
+    return EVENT_NULL;
+}
+
 // Spectral tracking from `origin` along `dir` over `[t0, t1]`
 // (`free_flight`): a real collision or none; `weight` (the path
 // throughput) is updated to keep the estimator unbiased per channel and set
@@ -147,21 +174,13 @@ fn free_flight(
         if !c.found {
             return FreeFlight(0.0, false);
         }
-        let m = c.majorant;
-        let sigma_t = medium_sigma_t(origin + dir * c.t);
-        let sigma_n = max(vec3<f32>(m) - sigma_t, vec3<f32>(0.0));
-        let p_real = max_element(*weight * sigma_t);
-        let p_null = max_element(*weight * sigma_n);
-        let total = p_real + p_null;
-        if total <= 0.0 {
-            *weight = vec3<f32>(0.0);
-            return FreeFlight(0.0, false);
-        }
-        if rng_next_f32(rng) * total < p_real {
-            *weight *= sigma_t * (total / (m * p_real));
+        let event = spectral_event(medium_sigma_t(origin + dir * c.t), c.majorant, weight, rng);
+        if event == EVENT_REAL {
             return FreeFlight(c.t, true);
         }
-        *weight *= sigma_n * (total / (m * p_null));
+        if event == EVENT_DEAD {
+            return FreeFlight(0.0, false);
+        }
     }
     // Unreachable: the loop only returns.
     return FreeFlight(0.0, false);
@@ -212,21 +231,15 @@ fn free_flight_probed(
                 f.probed = true;
             }
         }
-        let sigma_n = max(vec3<f32>(m) - sigma_t, vec3<f32>(0.0));
-        let p_real = max_element(*weight * sigma_t);
-        let p_null = max_element(*weight * sigma_n);
-        let total = p_real + p_null;
-        if total <= 0.0 {
-            *weight = vec3<f32>(0.0);
-            return f;
-        }
-        if rng_next_f32(rng) * total < p_real {
-            *weight *= sigma_t * (total / (m * p_real));
+        let event = spectral_event(sigma_t, m, weight, rng);
+        if event == EVENT_REAL {
             f.t = c.t;
             f.hit = true;
             return f;
         }
-        *weight *= sigma_n * (total / (m * p_null));
+        if event == EVENT_DEAD {
+            return f;
+        }
     }
     // Unreachable: the loop only returns.
     return f;
