@@ -239,9 +239,9 @@ impl<'a, D: DensityField> Walks<'a, D> {
             return;
         }
         // Only a caller that sums the terms may trade the gates for the
-        // tail's one reading per flight ([`Walks::collision_tail`]), only on the
-        // optical-depth clock, whose rate is the grey extinction, and only
-        // where it pays ([`COLLISION_TAIL_MIN_G`]).
+        // tail's one reading per flight ([`Walks::collision_tail`]), only on
+        // the optical-depth clock, whose rate is the grey extinction, and
+        // only where it pays ([`COLLISION_TAIL_MIN_G`]).
         let tail =
             tail && clock == Clock::OpticalDepth && vol.optics.g.abs() >= COLLISION_TAIL_MIN_G;
         self.walk(
@@ -468,13 +468,15 @@ fn optical_depth_flight<D: DensityField>(
 /// ([`Walks::accumulate_collided`], [`Walks::accumulate_sum`]) reads its
 /// source once per flight, at one of the flight's tentative collisions
 /// ([`free_flight_probed`]), instead of at its gates, and no longer
-/// marches the clock (method §5.4, "Collision tails"). The gates sit at whole windows of the clock from the walk's
-/// start; a sum over them from a collision on equals the collision
-/// estimator's integral (divided by `s*`) only where the collision's clock
-/// falls evenly between two gates. After one collision it does not quite
-/// (the clock there is `Exp(1)` from the start: the gate after it comes
-/// 0.54 `s*` later on average at `s*` 0.5, not 0.5), and reading from the
-/// first collision on made the suite's wispy smoke 2.3 % bright; each
+/// marches the clock (method §5.4, "Collision tails"). The gates sit at
+/// whole windows of the clock from the walk's start; a sum over them from
+/// a collision on equals the tail's integral (divided by `s*`) only where
+/// the collision's clock falls evenly between two gates. After one
+/// collision it does not quite (the clock there is `Exp(1)` from the
+/// start: the gate after it comes 0.54 `s*` later on average at `s*` 0.5,
+/// not 0.5), and reading from the first collision on made the suite's
+/// wispy smoke 2.3 % bright (measured with readings at the collisions,
+/// validation §3.22); each
 /// collision's exponential flight evens it out by a factor `|1 + 2πi/s*|`
 /// (12.6 at `s*` 0.5), so after three the difference is 2000 times
 /// smaller than after one.
@@ -566,7 +568,8 @@ impl<D: DensityField> Walks<'_, D> {
     /// is read once — also the last one, which leaves the medium, where a
     /// reading at real collisions would have read nothing (that collision
     /// estimator, `(1/s*) W (σ_g/σ_t)(S₁/b)` at the collision ending each
-    /// flight, was 6–11 % noisier a light set on the clouds of `g` 0.85–0.95;
+    /// flight, left the light sets' variance per second 6–11 % higher on the
+    /// clouds of `g` 0.85–0.95;
     /// [validation §3.23](crate::doc::validation)) — and the clock, a
     /// quadrature of about eight density lookups per mean free path, is not
     /// needed. A second flight ([`second_flight`]) is read with its factor,
