@@ -47,6 +47,7 @@ use lantern::gpu::mirrors::{
 use lantern::gpu::shaders::{ModuleSource, MODULES};
 use lantern::gpu::GpuRenderer;
 use lantern::physics::internal::sources::{kernel_neighbours_for_noisy_set, InternalLights};
+use lantern::render::renewal::WeightedSets;
 use lantern::render::{internal_params, Film, PreparedScene};
 use lantern::scene::{Clock, InternalSettings, L1Form, Method, RenderSettings};
 
@@ -1975,6 +1976,14 @@ fn accumulated_grey_moments_are_the_passes_sums() {
 /// A balanced GPU schedule (`GpuPasses`, sets built on the CPU as the
 /// previewer builds them) on the suite's `scene` at 48² with the defaults,
 /// over its first `sets` sets: the kernel each set held, and the schedule.
+///
+/// Its passes keep their sets (`GpuPasses::with_weighted_sets`), and the
+/// image it gives with each set weighed by its noise is what a
+/// `WeightedSets` makes of the same passes, each read back on its own
+/// (the difference of the accumulated sums before and after it), closed
+/// where the schedule renewed the set with the noise it knew then: the
+/// sets' boundaries, their sums and their weights as the GPU's passes
+/// keep them, and (from the third set on) not the passes' mean.
 fn gpu_balanced(
     ctx: &lantern::gpu::GpuContext,
     scene: &str,
@@ -1994,9 +2003,12 @@ fn gpu_balanced(
         settings.seed,
     )
     .unwrap_or_else(|e| panic!("{e:#}"));
-    let mut passes = GpuPasses::new(&renderer, &settings, true, lights.timings.total());
+    let mut passes = GpuPasses::new(&renderer, &settings, true, lights.timings.total())
+        .with_weighted_sets(lights.walk_share);
     let never = AtomicBool::new(false);
     let mut kernels = vec![passes.balanced().expect("balanced").kernel_neighbours()];
+    let mut sets_by_pass = WeightedSets::new(48 * 48, kernels[0], lights.walk_share);
+    let mut before = vec![[0.0f64; 3]; 48 * 48];
     while passes.balanced().map_or(0, |b| b.complete_sets()) < sets {
         let renewal = passes
             .next(
@@ -2006,14 +2018,53 @@ fn gpu_balanced(
                 LightBuilder::Cpu(&never),
             )
             .unwrap_or_else(|e| panic!("{e:#}"));
+        let schedule = passes.balanced().expect("balanced");
         if let Renewal::Renewed(set) = renewal {
             assert_eq!(set as usize, kernels.len());
-            kernels.push(passes.balanced().expect("balanced").kernel_neighbours());
+            kernels.push(schedule.kernel_neighbours());
+            sets_by_pass.next_set(schedule.set_noise(), schedule.kernel_neighbours(), 1.0);
         }
+        let after = renderer
+            .read_back()
+            .unwrap_or_else(|e| panic!("{e:#}"))
+            .sums();
+        let pass: Vec<Vec3> = after
+            .iter()
+            .zip(&before)
+            .map(|(a, b)| {
+                Vec3::new(
+                    (a[0] - b[0]) as f32,
+                    (a[1] - b[1]) as f32,
+                    (a[2] - b[2]) as f32,
+                )
+            })
+            .collect();
+        sets_by_pass.add_pass(&pass);
+        before = after;
     }
     let image = renderer.read_back().unwrap_or_else(|e| panic!("{e:#}"));
     assert_eq!(image.cut_short_passes(), 0, "{scene}: passes cut short");
-    (kernels, passes.balanced().expect("balanced").clone())
+    let schedule = passes.balanced().expect("balanced");
+    let weighted = passes.weighted_image(&image).expect("sets kept");
+    let want = sets_by_pass.mean(schedule.set_noise());
+    let by_passes = image.film().mean();
+    let scale = want.iter().map(|v| v.max_element()).fold(0.0f32, f32::max);
+    let largest = |a: &[Vec3], b: &[Vec3]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (*x - *y).abs().max_element())
+            .fold(0.0f32, f32::max)
+    };
+    let (off, from_passes) = (largest(&weighted, &want), largest(&weighted, &by_passes));
+    println!(
+        "{scene}: weighed sets against those of the passes read one by one: largest difference {off:.2e}, from the passes' mean {from_passes:.2e} (largest pixel {scale:.3e})"
+    );
+    assert!(off <= 1e-4 * scale, "{scene}: {off} (scale {scale})");
+    assert!(
+        from_passes > 1e-3 * scale,
+        "{scene}: the sets were weighed by their passes"
+    );
+    (kernels, schedule.clone())
 }
 
 /// The balanced GPU schedule measures the passes' and the sets' noise

@@ -219,7 +219,8 @@ fn render_to(
     let renderer = Renderer::new_within(prepared.clone(), settings, &never, walk_deadline)
         .context("render was cancelled")?;
     let mut elapsed = start.elapsed();
-    let mut passes = Passes::new(&renderer, balanced, elapsed.as_secs_f64());
+    let mut passes =
+        Passes::new(&renderer, balanced, elapsed.as_secs_f64()).with_weighted_sets(&renderer);
     let cam = prepared.camera;
     let mut film = Film::new(cam.width, cam.height);
     let mut out = Vec::new();
@@ -237,7 +238,8 @@ fn render_to(
             pass += 1;
         }
         report_set(label, passes.last_set(), passes.balanced());
-        out.push(truth.snapshot(label, target, pass, elapsed, &film.mean(), ""));
+        let image = passes.weighted_image().unwrap_or_else(|| film.mean());
+        out.push(truth.snapshot(label, target, pass, elapsed, &image, ""));
     }
     Ok(out)
 }
@@ -273,7 +275,9 @@ fn gpu_render_to(
     renderer.finish()?;
     let mut elapsed = start.elapsed();
     let set_secs = build.map_or(elapsed.as_secs_f64(), |b| b.whole_set_secs());
-    let mut passes = GpuPasses::new(&renderer, settings, balanced, set_secs);
+    let first_share = build.map_or(1.0, |b| b.walk_share);
+    let mut passes =
+        GpuPasses::new(&renderer, settings, balanced, set_secs).with_weighted_sets(first_share);
     let mut out = Vec::new();
     for &target in times {
         let due = Duration::from_secs_f64(target);
@@ -294,7 +298,9 @@ fn gpu_render_to(
         report_set(label, passes.last_set(), passes.balanced());
         let image = renderer.read_back()?;
         warn_cut_short(&image);
-        let mean = image.film().mean();
+        let mean = passes
+            .weighted_image(&image)
+            .unwrap_or_else(|| image.film().mean());
         out.push(truth.snapshot(label, target, passes.passes(), elapsed, &mean, " (GPU)"));
     }
     Ok(out)

@@ -21,6 +21,7 @@ use crate::render::tonemap::ViewTransform;
 use crate::render::{internal_params, Film, PreparedScene};
 use crate::scene::{Method, RenderSettings, Scene};
 use crate::session::{Backend, GpuPasses, LightBuilder, Renewal};
+use glam::Vec3;
 
 /// Options of `lantern render`.
 #[derive(Clone, Debug, clap::Args)]
@@ -142,11 +143,16 @@ pub fn render_metadata(
     meta
 }
 
-/// Writes a render's image (EXR with `meta` in its header, or PNG) and,
-/// if asked, the variance of its pixel means (EXR).
+/// Writes a render's image (EXR with `meta` in its header, or PNG):
+/// `image`, the mean of `film`'s passes or, with a balanced schedule of
+/// light sets, their sets weighed by their noise
+/// ([`WeightedSets`](crate::render::renewal::WeightedSets)); and, if
+/// asked, the variance of its pixel means from the spread of `film`'s
+/// passes (EXR).
 fn write_render(
     out: &Path,
     film: &Film,
+    image: &[Vec3],
     exposure: f32,
     view: ViewTransform,
     meta: &[(String, String)],
@@ -154,9 +160,9 @@ fn write_render(
 ) -> Result<()> {
     let (w, h) = (film.width, film.height);
     if crate::render::export::extension(out).as_deref() == Some("exr") {
-        write_exr_with_metadata(out, w, h, &film.mean(), meta)?;
+        write_exr_with_metadata(out, w, h, image, meta)?;
     } else {
-        write_image(out, w, h, &film.mean(), exposure, view)?;
+        write_image(out, w, h, image, exposure, view)?;
     }
     if let Some(path) = variance {
         let mut meta = meta.to_vec();
@@ -273,7 +279,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let mut film = Film::new(w, h);
     let mut single = Film::new(w, h);
     let balanced = timed.time.is_some() && !timed.fixed_renewal;
-    let mut passes = Passes::new(&renderer, balanced, build_secs);
+    let mut passes = Passes::new(&renderer, balanced, build_secs).with_weighted_sets(&renderer);
     while rule.another(passes.passes(), t_build.elapsed().as_secs_f64()) {
         let remaining = rule.remaining(t_build.elapsed().as_secs_f64());
         let img = passes
@@ -309,9 +315,18 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if let Some(l) = renderer.internal_lights() {
         meta.extend(first_set_metadata(l.walked, l.walk_share));
     }
-    write_render(out, &film, exposure, view, &meta, timed.variance.as_deref())?;
+    let image = passes.weighted_image().unwrap_or_else(|| film.mean());
+    write_render(
+        out,
+        &film,
+        &image,
+        exposure,
+        view,
+        &meta,
+        timed.variance.as_deref(),
+    )?;
     print_time_limit(timed, film.samples, spent);
-    let mean = film.image_mean();
+    let mean = image_mean(&image);
     println!(
         "rendered {} ({w}×{h}, {} spp, {:?}) in {:.2} s (+{:.2} s loading, {:.2} s re-sampling): {:.3} M samples/s; image mean RGB {:.5} {:.5} {:.5}; wrote {}",
         scene_path.display(),
@@ -494,7 +509,9 @@ fn render_gpu(
     let bar = pass_bar(rule);
     let start = Instant::now();
     let balanced = timed.time.is_some() && !timed.fixed_renewal;
-    let mut passes = GpuPasses::new(&renderer, settings, balanced, set_secs);
+    let first_share = build.map_or(1.0, |b| b.walk_share);
+    let mut passes =
+        GpuPasses::new(&renderer, settings, balanced, set_secs).with_weighted_sets(first_share);
     let mut resample_secs = 0.0;
     while rule.another(passes.passes(), t_build.elapsed().as_secs_f64()) {
         // A fresh light set when the pass starts one, walked on the GPU
@@ -526,6 +543,7 @@ fn render_gpu(
     let image = renderer.read_back()?;
     warn_cut_short(&image);
     let film = image.film();
+    let weighted = passes.weighted_image(&image).unwrap_or_else(|| film.mean());
     let s_star =
         (settings.method == Method::Internal).then(|| internal_params(prepared, settings).s_star);
     let mut meta = render_metadata(
@@ -539,9 +557,17 @@ fn render_gpu(
     if let Some(b) = build {
         meta.extend(first_set_metadata(b.walked, b.walk_share));
     }
-    write_render(out, &film, exposure, view, &meta, timed.variance.as_deref())?;
+    write_render(
+        out,
+        &film,
+        &weighted,
+        exposure,
+        view,
+        &meta,
+        timed.variance.as_deref(),
+    )?;
     print_time_limit(timed, film.samples, spent);
-    let mean = film.image_mean();
+    let mean = image_mean(&weighted);
     let single = image_mean(&image.single_mean());
     let samples = w as f64 * h as f64 * film.samples as f64;
     println!(

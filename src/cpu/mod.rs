@@ -21,7 +21,7 @@ use crate::physics::internal::gather::gather;
 use crate::physics::internal::sources::{InternalLights, InternalParams};
 use crate::physics::reference::radiance_split;
 use crate::physics::rng::{pixel_jitter, Rng};
-use crate::render::renewal::{whole_set_secs, BalancedRenewal};
+use crate::render::renewal::{whole_set_secs, BalancedRenewal, WeightedSets};
 use crate::render::{internal_params, internal_params_for_set, light_set, Film, PreparedScene};
 use crate::scene::{CameraFrame, Method, RenderSettings};
 
@@ -282,6 +282,9 @@ pub struct Passes {
     pass: u32,
     set: u32,
     balanced: Option<BalancedRenewal>,
+    /// With a balanced schedule, the passes' totals by light set, for the
+    /// image that weighs each set by its noise ([`Passes::weighted_image`]).
+    sets: Option<WeightedSets>,
 }
 
 impl Passes {
@@ -305,7 +308,19 @@ impl Passes {
             pass: 0,
             set: 0,
             balanced,
+            sets: None,
         }
+    }
+
+    /// These passes, keeping their totals by light set where they follow
+    /// a balanced schedule, for [`Passes::weighted_image`] (call before
+    /// the first pass; `renderer` is the one passed to [`Passes::new`]).
+    pub fn with_weighted_sets(mut self, renderer: &Renderer) -> Self {
+        self.sets = self.balanced.as_ref().map(|b| {
+            let share = renderer.internal_lights().map_or(1.0, |l| l.walk_share);
+            WeightedSets::new(b.pixels(), b.kernel_neighbours(), share)
+        });
+        self
     }
 
     /// Renders the next pass (building its light set first if it starts
@@ -334,15 +349,30 @@ impl Passes {
             self.set += 1;
             let t = Instant::now();
             let deadline = schedule.walk_deadline(t);
-            let share =
-                renderer.build_set(self.set, schedule.kernel_neighbours(), cancel, deadline)?;
+            let kernel = schedule.kernel_neighbours();
+            let share = renderer.build_set(self.set, kernel, cancel, deadline)?;
             schedule.add_set_build(whole_set_secs(t.elapsed().as_secs_f64(), share));
+            if let Some(sets) = &mut self.sets {
+                sets.next_set(schedule.set_noise(), kernel, share);
+            }
         }
         let t = Instant::now();
         let img = renderer.pass_in_set(self.pass, self.set, cancel)?;
         schedule.add_pass(&img.total, t.elapsed().as_secs_f64());
+        if let Some(sets) = &mut self.sets {
+            sets.add_pass(&img.total);
+        }
         self.pass += 1;
         Some(img)
+    }
+
+    /// The image of the passes so far with each light set's mean weighed
+    /// by its noise ([`WeightedSets`]), where the passes follow a balanced
+    /// schedule (`None` otherwise: there every set has the same number of
+    /// passes and the mean over the passes is the image).
+    pub fn weighted_image(&self) -> Option<Vec<Vec3>> {
+        let (schedule, sets) = (self.balanced.as_ref()?, self.sets.as_ref()?);
+        Some(sets.mean(schedule.set_noise()))
     }
 
     /// Passes rendered.

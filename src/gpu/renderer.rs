@@ -302,6 +302,21 @@ impl GpuImage {
         Film::from_moments(self.width, self.height, self.samples, &mean, &m2)
     }
 
+    /// Per pixel and channel the sum of the accumulated passes (the
+    /// running mean times the passes): differences between two read-backs
+    /// give a light set's sums
+    /// ([`WeightedSets::replace_current`](crate::render::renewal::WeightedSets::replace_current)).
+    pub fn sums(&self) -> Vec<[f64; 3]> {
+        let n = f64::from(self.samples);
+        self.pixels
+            .iter()
+            .map(|p| {
+                let m = p.mean();
+                [n * f64::from(m.x), n * f64::from(m.y), n * f64::from(m.z)]
+            })
+            .collect()
+    }
+
     /// Per pixel the sum and the sum of squares of the channels' mean
     /// `(r + g + b)/3` over the accumulated passes, from the running mean
     /// and [`GpuAccum::grey_m2`]: the moments a balanced light-set schedule

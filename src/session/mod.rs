@@ -20,9 +20,9 @@ use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 use crate::gpu::walks::build_internal_lights_gpu;
-use crate::gpu::{GpuContext, GpuError, GpuRenderer};
+use crate::gpu::{GpuContext, GpuError, GpuImage, GpuRenderer};
 use crate::physics::internal::sources::InternalParams;
-use crate::render::renewal::{whole_set_secs, BalancedRenewal};
+use crate::render::renewal::{whole_set_secs, BalancedRenewal, WeightedSets};
 use crate::render::{internal_params_for_set, light_set_starting, PreparedScene};
 use crate::scene::{Method, RenderSettings};
 
@@ -150,6 +150,10 @@ struct GpuBalance {
     /// Per pixel the running sum and sum of squares when the current set
     /// began.
     at_set_start: Vec<(f64, f64)>,
+    /// The passes' totals by light set, where asked for
+    /// ([`GpuPasses::with_weighted_sets`]), and per pixel and channel the
+    /// running sums and the passes when the current set began.
+    sets: Option<(WeightedSets, Vec<[f64; 3]>, u32)>,
 }
 
 impl GpuBalance {
@@ -167,7 +171,8 @@ impl GpuBalance {
         builder: LightBuilder<'_>,
     ) -> Result<Renewal, GpuError> {
         let t = Instant::now();
-        let running = renderer.read_back()?.grey_sums();
+        let image = renderer.read_back()?;
+        let running = image.grey_sums();
         let sums: Vec<(f64, f64)> = running
             .iter()
             .zip(&self.at_set_start)
@@ -175,9 +180,15 @@ impl GpuBalance {
             .collect();
         self.schedule.replace_set_sums(&sums);
         self.at_set_start = running;
+        if let Some((sets, then, passes)) = &mut self.sets {
+            let now = image.sums();
+            sets.replace_current(set_sums(&now, then), image.samples - *passes);
+            (*then, *passes) = (now, image.samples);
+        }
         self.schedule.begin_set(share);
+        let kernel = self.schedule.kernel_neighbours();
         let params = InternalParams {
-            kernel_neighbours: self.schedule.kernel_neighbours(),
+            kernel_neighbours: kernel,
             walk_deadline: self.schedule.walk_deadline(t),
             ..internal_params_for_set(prepared, settings, set)
         };
@@ -186,8 +197,20 @@ impl GpuBalance {
         };
         let secs = whole_set_secs(t.elapsed().as_secs_f64(), walked);
         self.schedule.add_set_build(secs);
+        if let Some((sets, _, _)) = &mut self.sets {
+            sets.next_set(self.schedule.set_noise(), kernel, walked);
+        }
         Ok(Renewal::Renewed(set))
     }
+}
+
+/// A light set's per-pixel sums: the running sums `now` less those when
+/// it began.
+fn set_sums(now: &[[f64; 3]], then: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    now.iter()
+        .zip(then)
+        .map(|(n, t)| [n[0] - t[0], n[1] - t[1], n[2] - t[2]])
+        .collect()
 }
 
 impl GpuPasses {
@@ -211,6 +234,7 @@ impl GpuPasses {
             GpuBalance {
                 schedule,
                 at_set_start: vec![(0.0, 0.0); pixels],
+                sets: None,
             }
         });
         Self {
@@ -287,6 +311,31 @@ impl GpuPasses {
     /// The balanced schedule, if the passes follow one.
     pub fn balanced(&self) -> Option<&BalancedRenewal> {
         self.balanced.as_ref().map(|b| &b.schedule)
+    }
+
+    /// These passes, keeping their totals by light set where they follow
+    /// a balanced schedule, for [`GpuPasses::weighted_image`] (as
+    /// [`crate::cpu::Passes::with_weighted_sets`]; call before the first
+    /// pass). `first_share` is the share of its walks set 0 walked.
+    pub fn with_weighted_sets(mut self, first_share: f64) -> Self {
+        if let Some(b) = &mut self.balanced {
+            let pixels = b.schedule.pixels();
+            let sets = WeightedSets::new(pixels, b.schedule.kernel_neighbours(), first_share);
+            b.sets = Some((sets, vec![[0.0; 3]; pixels], 0));
+        }
+        self
+    }
+
+    /// The image of `image`, the renderer's accumulated passes read back,
+    /// with each light set's mean weighed by its noise ([`WeightedSets`]),
+    /// where the passes follow a balanced schedule and keep their sets
+    /// ([`GpuPasses::with_weighted_sets`]); `None` otherwise.
+    pub fn weighted_image(&self, image: &GpuImage) -> Option<Vec<glam::Vec3>> {
+        let b = self.balanced.as_ref()?;
+        let (sets, then, passes) = b.sets.as_ref()?;
+        let mut sets = sets.clone();
+        sets.replace_current(set_sums(&image.sums(), then), image.samples - passes);
+        Some(sets.mean(b.schedule.set_noise()))
     }
 }
 
