@@ -2046,7 +2046,7 @@ fn gpu_balanced(
     assert_eq!(image.cut_short_passes(), 0, "{scene}: passes cut short");
     let schedule = passes.balanced().expect("balanced");
     let weighted = passes.weighted_image(&image).expect("sets kept");
-    let want = sets_by_pass.mean(schedule.set_noise());
+    let want = sets_by_pass.mean(passes.set_noise_now(&image));
     let by_passes = image.film().mean();
     let scale = want.iter().map(|v| v.max_element()).fold(0.0f32, f32::max);
     let largest = |a: &[Vec3], b: &[Vec3]| {

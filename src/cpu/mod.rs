@@ -372,7 +372,7 @@ impl Passes {
     /// passes and the mean over the passes is the image).
     pub fn weighted_image(&self) -> Option<Vec<Vec3>> {
         let (schedule, sets) = (self.balanced.as_ref()?, self.sets.as_ref()?);
-        Some(sets.mean(schedule.set_noise()))
+        Some(sets.mean(schedule.set_noise_now()))
     }
 
     /// Passes rendered.

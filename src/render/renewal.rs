@@ -21,6 +21,11 @@
 //! The measured times make the schedule depend on the machine, so it is
 //! for renders that stop at a time limit (which do anyway); a render of a
 //! fixed sample count keeps the fixed `resample_every` and reproduces.
+//!
+//! Such a render's sets last unequal numbers of passes; [`WeightedSets`]
+//! makes its image with each set's mean weighed by the inverse of its
+//! predicted variance instead of each pass alike
+//! ([method §5.5](crate::doc::method)).
 
 use std::time::{Duration, Instant};
 
@@ -564,6 +569,32 @@ impl BalancedRenewal {
             pass_variance: e.pass_variance.max(0.0),
             set_variance: (e.set_variance / narrowing).max(0.0),
         })
+    }
+
+    /// [`BalancedRenewal::set_noise`] as if the current set closed now
+    /// with its passes so far: what an image read now weighs its sets by
+    /// ([`WeightedSets::mean`]). A render that stops at a limit often ends
+    /// in its second set, and from the first set alone there is no `b`.
+    pub fn set_noise_now(&self) -> Option<SetNoise> {
+        if self.passes_in_set == 0 {
+            return self.set_noise();
+        }
+        let mut closed = self.clone();
+        closed.close_set();
+        closed.set_noise()
+    }
+
+    /// [`BalancedRenewal::set_noise_now`] for a renderer that accumulates
+    /// its passes elsewhere (the GPU): `sums` are the current set's per-pixel
+    /// sums so far, as [`BalancedRenewal::replace_set_sums`] takes them.
+    pub fn set_noise_now_with(&self, sums: &[(f64, f64)]) -> Option<SetNoise> {
+        if self.passes_in_set == 0 {
+            return self.set_noise();
+        }
+        let mut closed = self.clone();
+        closed.replace_set_sums(sums);
+        closed.close_set();
+        closed.set_noise()
     }
 
     /// [`BalancedRenewal::estimates`] once `sets` sets are complete.
@@ -1297,7 +1328,11 @@ mod tests {
     /// running sums ([`BalancedRenewal::replace_set_sums`]: what a GPU
     /// renderer's read-backs give), chooses what one fed every pass's
     /// image chooses: the same periods and kernels, the same estimates to
-    /// rounding.
+    /// rounding. The noise an image read mid-set weighs its sets by
+    /// ([`BalancedRenewal::set_noise_now`], `…_with` the set's sums so far)
+    /// is known from the second set on, is the same both ways, and is what
+    /// the schedule's own [`BalancedRenewal::set_noise`] reads once that
+    /// set closes.
     #[test]
     fn set_sums_from_running_moments_match_the_passes() {
         let (a, b, c, d) = (1.0f64, 2.0f64, 0.1f64, 0.4f64);
@@ -1313,18 +1348,25 @@ mod tests {
         let mut schedules = Vec::new();
         for pass in 0..100 {
             if pass > 0 {
+                let set: Vec<(f64, f64)> = running
+                    .iter()
+                    .zip(&at_set_start)
+                    .map(|(r, s)| (r.0 - s.0, r.1 - s.1))
+                    .collect();
+                let (now, now_with) = (by_pass.set_noise_now(), by_sums.set_noise_now_with(&set));
+                assert_eq!(now.is_some(), by_pass.complete_sets() >= 1, "pass {pass}");
+                if let (Some(n), Some(m)) = (now, now_with) {
+                    assert!((n.pass_variance / m.pass_variance - 1.0).abs() < 1e-9);
+                    assert!((n.set_variance / m.set_variance - 1.0).abs() < 1e-9);
+                }
                 if by_sums.set_is_complete() {
-                    let set: Vec<(f64, f64)> = running
-                        .iter()
-                        .zip(&at_set_start)
-                        .map(|(r, s)| (r.0 - s.0, r.1 - s.1))
-                        .collect();
                     by_sums.replace_set_sums(&set);
                     at_set_start.clone_from(&running);
                 }
                 let (p, q) = (by_pass.next_starts_set(), by_sums.next_starts_set());
                 assert_eq!(p, q, "pass {pass}");
                 if p {
+                    assert_eq!(by_pass.set_noise(), now, "pass {pass}");
                     schedules.push((by_pass.period(), by_pass.kernel_neighbours()));
                     assert_eq!(
                         (by_sums.period(), by_sums.kernel_neighbours()),

@@ -22,7 +22,7 @@ use std::time::Instant;
 use crate::gpu::walks::build_internal_lights_gpu;
 use crate::gpu::{GpuContext, GpuError, GpuImage, GpuRenderer};
 use crate::physics::internal::sources::InternalParams;
-use crate::render::renewal::{whole_set_secs, BalancedRenewal, WeightedSets};
+use crate::render::renewal::{whole_set_secs, BalancedRenewal, SetNoise, WeightedSets};
 use crate::render::{internal_params_for_set, light_set_starting, PreparedScene};
 use crate::scene::{Method, RenderSettings};
 
@@ -335,7 +335,21 @@ impl GpuPasses {
         let (sets, then, passes) = b.sets.as_ref()?;
         let mut sets = sets.clone();
         sets.replace_current(set_sums(&image.sums(), then), image.samples - passes);
-        Some(sets.mean(b.schedule.set_noise()))
+        Some(sets.mean(self.set_noise_now(image)))
+    }
+
+    /// The noise an image read back now weighs its sets by: the balanced
+    /// schedule's, with the current set closed as it stands in `image`
+    /// ([`BalancedRenewal::set_noise_now_with`]).
+    pub fn set_noise_now(&self, image: &GpuImage) -> Option<SetNoise> {
+        let b = self.balanced.as_ref()?;
+        let sums: Vec<(f64, f64)> = image
+            .grey_sums()
+            .iter()
+            .zip(&b.at_set_start)
+            .map(|(now, then)| (now.0 - then.0, now.1 - then.1))
+            .collect();
+        b.schedule.set_noise_now_with(&sums)
     }
 }
 
