@@ -493,8 +493,7 @@ impl BalancedRenewal {
     /// [`BalancedRenewal::sets_outweigh_passes`] for estimates `e` of the
     /// complete sets.
     fn outweighs(&self, e: &RenewalEstimates) -> bool {
-        let narrowing = self.kernel_factors / f64::from(self.sets);
-        let b = e.set_variance / narrowing.max(1.0);
+        let b = e.set_variance / self.narrowing();
         b * e.set_secs >= e.pass_variance * e.pass_secs
     }
 
@@ -564,11 +563,17 @@ impl BalancedRenewal {
     /// two are.
     pub fn set_noise(&self) -> Option<SetNoise> {
         let e = self.estimates_after(SETS_BEFORE_KERNEL)?;
-        let narrowing = (self.kernel_factors / f64::from(self.sets)).max(1.0);
         Some(SetNoise {
             pass_variance: e.pass_variance.max(0.0),
-            set_variance: (e.set_variance / narrowing).max(0.0),
+            set_variance: (e.set_variance / self.narrowing()).max(0.0),
         })
+    }
+
+    /// How much noisier the complete sets were for their kernels than sets
+    /// of [`KERNEL_NEIGHBOURS`] lights: the mean of `64/k` over them (a set's
+    /// noise grows as `1/k`), at least 1.
+    fn narrowing(&self) -> f64 {
+        (self.kernel_factors / f64::from(self.sets.max(1))).max(1.0)
     }
 
     /// [`BalancedRenewal::set_noise`] as if the current set closed now

@@ -182,7 +182,7 @@ impl GpuBalance {
         self.at_set_start = running;
         if let Some((sets, then, passes)) = &mut self.sets {
             let now = image.sums();
-            sets.replace_current(set_sums(&now, then), image.samples - *passes);
+            sets.replace_current(set_sums(&now, then), image.samples.saturating_sub(*passes));
             (*then, *passes) = (now, image.samples);
         }
         self.schedule.begin_set(share);
@@ -334,7 +334,10 @@ impl GpuPasses {
         let b = self.balanced.as_ref()?;
         let (sets, then, passes) = b.sets.as_ref()?;
         let mut sets = sets.clone();
-        sets.replace_current(set_sums(&image.sums(), then), image.samples - passes);
+        sets.replace_current(
+            set_sums(&image.sums(), then),
+            image.samples.saturating_sub(*passes),
+        );
         Some(sets.mean(self.set_noise_now(image)))
     }
 
