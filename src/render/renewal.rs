@@ -709,9 +709,12 @@ impl SetSums {
 /// expectation (every set's mean is unbiased); these come from the noise
 /// pooled over the whole image and all sets.
 ///
-/// Sets that close before the schedule can weigh them (the first two) are
-/// held and weighed when it can; until then, and where it cannot, the
-/// image is the mean of the passes.
+/// A set that closes before the schedule can weigh it (the first: the
+/// sets' noise needs two) is held and weighed when it can; an image read
+/// during the second set is weighed with the noise as if that set closed
+/// as it stands ([`BalancedRenewal::set_noise_now`]); before that, and
+/// where the noise cannot weigh a set, the image is the mean of the
+/// passes.
 #[derive(Clone, Debug)]
 pub struct WeightedSets {
     /// `Σ w_s mean_s` per pixel over the sets weighed so far, and `Σ w_s`.
