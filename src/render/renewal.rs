@@ -814,26 +814,17 @@ impl WeightedSets {
             .filter(|s| s.passes > 0)
             .map(|s| (s, weight_of(s)))
             .collect();
-        // Weights by passes and by variance do not mix: where anything is
-        // held by its passes, so is everything (no set was weighed yet).
-        let by_passes = self.weight <= 0.0 && noise.is_none();
-        let total: f64 = if by_passes {
-            open.iter().map(|(s, _)| f64::from(s.passes)).sum()
-        } else {
-            self.weight + open.iter().map(|(_, w)| w).sum::<f64>()
-        };
+        // Without the noise every set weighs its passes (`weight` is then
+        // 0: nothing was weighed), and the image is the passes' mean.
+        let total = self.weight + open.iter().map(|(_, w)| w).sum::<f64>();
         if total <= 0.0 {
             return vec![Vec3::ZERO; self.weighed.len()];
         }
         (0..self.weighed.len())
             .map(|i| {
-                let mut v = if by_passes { [0.0; 3] } else { self.weighed[i] };
+                let mut v = self.weighed[i];
                 for (set, w) in &open {
-                    let per_pass = if by_passes {
-                        1.0
-                    } else {
-                        w / f64::from(set.passes)
-                    };
+                    let per_pass = w / f64::from(set.passes);
                     for (acc, s) in v.iter_mut().zip(set.sum[i]) {
                         *acc += per_pass * s;
                     }

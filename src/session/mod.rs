@@ -173,12 +173,8 @@ impl GpuBalance {
         let t = Instant::now();
         let image = renderer.read_back()?;
         let running = image.grey_sums();
-        let sums: Vec<(f64, f64)> = running
-            .iter()
-            .zip(&self.at_set_start)
-            .map(|(now, then)| (now.0 - then.0, now.1 - then.1))
-            .collect();
-        self.schedule.replace_set_sums(&sums);
+        self.schedule
+            .replace_set_sums(&grey_set_sums(&running, &self.at_set_start));
         self.at_set_start = running;
         if let Some((sets, then, passes)) = &mut self.sets {
             let now = image.sums();
@@ -202,6 +198,15 @@ impl GpuBalance {
         }
         Ok(Renewal::Renewed(set))
     }
+}
+
+/// A light set's per-pixel sum and sum of squares of the channels' mean:
+/// the running ones `now` less those when it began.
+fn grey_set_sums(now: &[(f64, f64)], then: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    now.iter()
+        .zip(then)
+        .map(|(n, t)| (n.0 - t.0, n.1 - t.1))
+        .collect()
 }
 
 /// A light set's per-pixel sums: the running sums `now` less those when
@@ -346,12 +351,7 @@ impl GpuPasses {
     /// ([`BalancedRenewal::set_noise_now_with`]).
     pub fn set_noise_now(&self, image: &GpuImage) -> Option<SetNoise> {
         let b = self.balanced.as_ref()?;
-        let sums: Vec<(f64, f64)> = image
-            .grey_sums()
-            .iter()
-            .zip(&b.at_set_start)
-            .map(|(now, then)| (now.0 - then.0, now.1 - then.1))
-            .collect();
+        let sums = grey_set_sums(&image.grey_sums(), &b.at_set_start);
         b.schedule.set_noise_now_with(&sums)
     }
 }
