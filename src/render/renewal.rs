@@ -557,7 +557,7 @@ impl BalancedRenewal {
 
     /// What a light set's mean is weighed by in the image
     /// ([`WeightedSets`]): the per-pixel variance of one pass `a` and the
-    /// variance a set of [`KERNEL_NEIGHBOURS`] lights adds `b₆₄` (the
+    /// variance a set of [`KERNEL_NEIGHBOURS`] lights adds `b_K` (the
     /// measured `b` scaled as [`BalancedRenewal::sets_outweigh_passes`]
     /// scales it), from the sets complete so far; `None` while fewer than
     /// two are.
@@ -570,7 +570,7 @@ impl BalancedRenewal {
     }
 
     /// How much noisier the complete sets were for their kernels than sets
-    /// of [`KERNEL_NEIGHBOURS`] lights: the mean of `64/k` over them (a set's
+    /// of [`KERNEL_NEIGHBOURS`] lights: the mean of `K/k` over them (a set's
     /// noise grows as `1/k`), at least 1.
     fn narrowing(&self) -> f64 {
         (self.kernel_factors / f64::from(self.sets.max(1))).max(1.0)
@@ -653,14 +653,15 @@ pub struct SetNoise {
     /// Per-pixel variance of one pass with one set, `a`.
     pub pass_variance: f64,
     /// Per-pixel variance one set of [`KERNEL_NEIGHBOURS`] lights, walked
-    /// to all of its walks, adds to each of its passes, `b₆₄`.
+    /// to all of its walks, adds to each of its passes, `b_K` (`K` =
+    /// [`KERNEL_NEIGHBOURS`]).
     pub set_variance: f64,
 }
 
 impl SetNoise {
     /// The variance of the mean of a set's `passes` passes, for a set whose
     /// kernel holds `kernel` lights and whose walks stopped at `share` of a
-    /// whole set's: `a/n + b₆₄ (64/k)/share` (a set's noise grows as `1/k`
+    /// whole set's: `a/n + b_K (K/k)/share` (a set's noise grows as `1/k`
     /// as its kernel narrows, [method §6.2](crate::doc::method), and as
     /// `1/share` as its walks are cut, §5.5).
     pub fn set_mean_variance(&self, passes: u32, kernel: u32, share: f64) -> f64 {
@@ -913,33 +914,36 @@ mod tests {
     }
 
     /// A render's image weighs each light set's mean by the inverse of its
-    /// variance `a/n + b (64/k)/share` once the noise is known, and by the
+    /// variance `a/n + b (K/k)/share` (`K` the first set's kernel,
+    /// [`KERNEL_NEIGHBOURS`]) once the noise is known, and by the
     /// passes before: sets closed before it are held and weighed at the
     /// first close that knows it, and the current set is weighed as it
     /// stands. Here `a = b = 1` (one pixel, each pass of set `s` reading
-    /// `s + 1`): sets of 2, 2 and 8 passes with 64 lights weigh `2/3`,
+    /// `s + 1`): sets of 2, 2 and 8 passes with `K` lights weigh `2/3`,
     /// `2/3` and `8/9`, where their passes would weigh 2, 2 and 8; a set
-    /// of 32 lights walked to half of its walks adds `4 b`.
+    /// of `K/2` lights walked to half of its walks adds about `4 b`.
     #[test]
     fn light_sets_are_weighed_by_their_noise() {
         let noise = SetNoise {
             pass_variance: 1.0,
             set_variance: 1.0,
         };
-        assert_eq!(noise.set_mean_variance(2, 64, 1.0), 1.5);
-        assert_eq!(noise.set_mean_variance(4, 32, 0.5), 4.25);
+        let (k, half) = (KERNEL_NEIGHBOURS, KERNEL_NEIGHBOURS / 2);
+        let narrow = 0.25 + f64::from(k) / f64::from(half) / 0.5;
+        assert_eq!(noise.set_mean_variance(2, k, 1.0), 1.5);
+        assert!((noise.set_mean_variance(4, half, 0.5) - narrow).abs() < 1e-12);
         let pass = |v: f32| [Vec3::splat(v)];
-        let mut sets = WeightedSets::new(1, 64, 1.0);
+        let mut sets = WeightedSets::new(1, k, 1.0);
         for _ in 0..2 {
             sets.add_pass(&pass(1.0));
         }
         // Before the noise is known: the mean of the passes.
-        sets.next_set(None, 64, 1.0);
+        sets.next_set(None, k, 1.0);
         for _ in 0..2 {
             sets.add_pass(&pass(2.0));
         }
         assert_eq!(sets.mean(None), vec![Vec3::splat(1.5)]);
-        sets.next_set(Some(noise), 64, 1.0);
+        sets.next_set(Some(noise), k, 1.0);
         assert!(sets.held.is_empty(), "the held sets are weighed");
         for _ in 0..8 {
             sets.add_pass(&pass(3.0));
@@ -964,11 +968,11 @@ mod tests {
             "{got} against {want}"
         );
         // A narrower kernel and a partial set weigh less.
-        sets.next_set(Some(noise), 32, 0.5);
+        sets.next_set(Some(noise), half, 0.5);
         for _ in 0..4 {
             sets.add_pass(&pass(5.0));
         }
-        let w4 = 1.0 / 4.25;
+        let w4 = 1.0 / narrow;
         let want = (w1 * 1.0 + w1 * 2.0 + w * 3.0 + w4 * 5.0) / (2.0 * w1 + w + w4);
         let got = sets.mean(Some(noise))[0];
         assert!(
@@ -1267,18 +1271,21 @@ mod tests {
         };
         assert_eq!(cheap_sets.best_period(), 1, "free sets: renew every pass");
     }
+
     /// The kernels a balanced schedule gives its sets, on passes made as in
     /// [`recovers_the_variance_components_and_the_best_period`] but with
-    /// each set's effect of variance `b₆₄ · 64/k` for the kernel of `k`
-    /// lights it was given (a kernel average of independent lights). The
-    /// first two sets always take the schedule's 64 and 32; then where the
-    /// sets' noise outweighs the passes' (`b₆₄ d ≥ a c`) every set keeps
-    /// 64, and where it does not they shrink to 21 and 16 — also when the
-    /// narrower kernels' sets, measured unscaled, would outweigh the
-    /// passes (`b₆₄` 0.6 against `a c/d` 1, the sets at 16 lights 2.4).
+    /// each set's effect of variance `b_K · K/k` for the kernel of `k`
+    /// lights it was given (a kernel average of independent lights; `K`
+    /// the first set's, [`KERNEL_NEIGHBOURS`]). The first two sets always
+    /// take the schedule's `K` and `K/2`; then where the sets' noise
+    /// outweighs the passes' (`b_K d ≥ a c`) the kernel shrinks slowly
+    /// ([`kernel_neighbours_for_noisy_set`]), and where it does not as
+    /// [`kernel_neighbours_for_set`] — also when the narrower kernels'
+    /// sets, measured unscaled, would outweigh the passes (`b_K` 0.6
+    /// against `a c/d` 1, the sets at 16 lights 1.7).
     #[test]
     fn the_kernel_shrinks_slowly_where_the_sets_outweigh_the_passes() {
-        let kernels = |a: f64, b64: f64, c: f64, d: f64| {
+        let kernels = |a: f64, b_k: f64, c: f64, d: f64| {
             let pixels = 4096;
             let mut rng = Rng::for_sample(9, 0, 0);
             let mut renewal = BalancedRenewal::new(pixels, 2);
@@ -1286,7 +1293,7 @@ mod tests {
             let mut kernels = vec![renewal.kernel_neighbours()];
             let mut effect = vec![0.0f64; pixels];
             let draw = |k: u32, effect: &mut Vec<f64>, rng: &mut Rng| {
-                let sd = (b64 * 64.0 / f64::from(k)).sqrt();
+                let sd = (b_k * f64::from(KERNEL_NEIGHBOURS) / f64::from(k)).sqrt();
                 for e in effect.iter_mut() {
                     *e = sd * normal(rng);
                 }
@@ -1303,7 +1310,8 @@ mod tests {
             (kernels, renewal.sets_outweigh_passes())
         };
         let (noisy_sets, outweigh) = kernels(1.0, 4.0, 0.1, 0.4);
-        assert_eq!(&noisy_sets[..2], &[64, 32], "{noisy_sets:?}");
+        let first_two = [0, 1].map(kernel_neighbours_for_set);
+        assert_eq!(&noisy_sets[..2], &first_two, "{noisy_sets:?}");
         assert!(noisy_sets.len() > 6, "{noisy_sets:?}");
         for (j, &k) in noisy_sets.iter().enumerate().skip(2) {
             assert_eq!(
@@ -1314,12 +1322,17 @@ mod tests {
         }
         assert_eq!(outweigh, Some(true));
         let (quiet_sets, outweigh) = kernels(4.0, 0.25, 0.1, 0.4);
-        assert_eq!(&quiet_sets[..4], &[64, 32, 21, 16], "{quiet_sets:?}");
-        assert!(quiet_sets[4..].iter().all(|&k| k == 16), "{quiet_sets:?}");
+        let shrunk: Vec<u32> = (0..quiet_sets.len() as u32)
+            .map(kernel_neighbours_for_set)
+            .collect();
+        assert_eq!(quiet_sets, shrunk);
+        assert_eq!(shrunk[..4], [45, 22, 16, 16]);
         assert_eq!(outweigh, Some(false));
         let (scaled, outweigh) = kernels(1.0, 0.6, 1.0, 1.0);
-        assert_eq!(&scaled[..4], &[64, 32, 21, 16], "{scaled:?}");
-        assert!(scaled[4..].iter().all(|&k| k == 16), "{scaled:?}");
+        let shrunk: Vec<u32> = (0..scaled.len() as u32)
+            .map(kernel_neighbours_for_set)
+            .collect();
+        assert_eq!(scaled, shrunk);
         assert_eq!(outweigh, Some(false));
     }
 

@@ -1335,6 +1335,7 @@ fn stream_image(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::physics::internal::sources::KERNEL_NEIGHBOURS;
 
     /// The driver's cut passes are told once while they last (a toast for
     /// every pass of every job would bury the window), with their share
@@ -1380,7 +1381,7 @@ mod tests {
     }
 
     /// The overlay's light-set status: none without a balanced schedule;
-    /// a fresh schedule's first set holds 64 lights, undecided; the
+    /// a fresh schedule's first set holds the first set's kernel, undecided; the
     /// decision reads in words.
     #[test]
     fn light_set_status_says_what_the_schedule_chose() {
@@ -1394,9 +1395,12 @@ mod tests {
                 first.sets_outweigh_passes,
                 first.noise_scale
             ),
-            (64, None, None)
+            (KERNEL_NEIGHBOURS, None, None)
         );
-        assert_eq!(first.label(), "light set 0, kernel 64 lights");
+        assert_eq!(
+            first.label(),
+            format!("light set 0, kernel {KERNEL_NEIGHBOURS} lights")
+        );
         let wide = LightSetStatus {
             set: 7,
             kernel_neighbours: 22,

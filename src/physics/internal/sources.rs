@@ -196,19 +196,38 @@ pub struct InternalParams {
     pub walk_deadline: Option<Instant>,
 }
 
-/// The automatic kernel radius in units of the mean light spacing: about
-/// 65 lights fall inside the reconstruction kernel's support, which
-/// averages out the walks' noise in `J_i` (with 1.5, about 14 lights, the
-/// thin sphere showed blotches of ±20 % at `K = 64`).
+/// The automatic kernel radius of a render's first light set for lights
+/// placed by density, in units of the mean light spacing: about 65 lights
+/// fall inside the reconstruction kernel's support, which averages out
+/// the walks' noise in `J_i` (with 1.5, about 14 lights, the thin sphere
+/// showed blotches of ±20 % at `K = 64`). Later sets' kernels are
+/// narrower by `(k/`[`KERNEL_NEIGHBOURS`]`)^{1/3}` ([`kernel_radius_for`]).
 pub const AUTO_KERNEL_FACTOR: f32 = 2.5;
 
-/// The automatic kernel radius of lights placed in the camera's windows
-/// ([`InternalParams::view_share`]) for the first light set of a render:
-/// the median distance from a light to its this-many-th nearest
-/// neighbour, about the number of lights inside [`AUTO_KERNEL_FACTOR`]'s
-/// support for lights that fill a volume. Later sets hold fewer
-/// ([`kernel_neighbours_for_set`]).
-pub const KERNEL_NEIGHBOURS: u32 = 64;
+/// Lights the automatic kernel holds in the first light set of a render
+/// where the lights stand in the camera's windows
+/// ([`InternalParams::view_share`]): its radius is the median distance
+/// from a light to its this-many-th nearest neighbour. Later sets hold
+/// fewer ([`kernel_neighbours_for_set`]). Lights placed by density keep
+/// [`AUTO_KERNEL_FACTOR`]'s radius in the first set, about 65 lights: a
+/// single set of them, which fills the volume sparsely, read the puffs'
+/// image 2.8 % dark with it and 3.0 % with 45 (`tests/internal_lights.rs`,
+/// the note's settings), where points with no light within the kernel
+/// read zero.
+///
+/// The kernel trades its blur, a bias that stays however many sets are
+/// averaged, against the walks' noise, about `1/k` per set. It held 64
+/// until the sets had grown quieter (walks towards the eye, collision
+/// tails, sets weighed by their noise); at 64 the blur was most of what a
+/// mean of many renders of the cumulus kept (its base band and outline,
+/// 3.8 % of the 8×8 blocks against 5.4 % of noise at 8 s). At 45, rendered
+/// at equal time over the suite, the blocks fell on six of its seven media
+/// (the sky-lit plume at 2 s 4.64 → 4.34 %, the cumulus at 8 s 6.61 →
+/// 6.32 %) and rose on the thick sphere, whose light is smooth (2–9 %
+/// higher); at 32 the cumulus's blocks fell further but the thick
+/// sphere, the chromatic sphere and the cumulus read up to a sixth noisier
+/// per pixel at 2 s ([validation §3.25](crate::doc::validation)).
+pub const KERNEL_NEIGHBOURS: u32 = 45;
 
 /// The fewest lights the automatic kernel holds in any set. With 8 the
 /// plume's image came out 0.8 % dark and with 4 by 3.2 % (128 sets each):
@@ -301,7 +320,7 @@ pub fn l1_reads_off_the_ray(params: &InternalParams, g: f32) -> bool {
 
 /// Lights the automatic kernel holds in light set `set` of a render
 /// (0-based): [`KERNEL_NEIGHBOURS`]` / (set + 1)`, at least
-/// [`KERNEL_NEIGHBOURS_FLOOR`] — 64, 32, 21, then 16.
+/// [`KERNEL_NEIGHBOURS_FLOOR`] — 45, 22, then 16.
 ///
 /// The kernel's average blurs `J` over `h`: a bias that renewed sets do
 /// not average away, while the walks' noise they do. So, as progressive
@@ -318,7 +337,7 @@ pub fn kernel_neighbours_for_set(set: u32) -> u32 {
 /// light sets add more noise than its passes
 /// ([`BalancedRenewal::sets_outweigh_passes`](crate::render::renewal::BalancedRenewal::sets_outweigh_passes)):
 /// [`KERNEL_NEIGHBOURS`]` / √(set + 1)`, at least
-/// [`KERNEL_NEIGHBOURS_FLOOR`] — 64, 45, 36, 32, 28, …, 16 from set 14.
+/// [`KERNEL_NEIGHBOURS_FLOOR`] — 45, 31, 25, 22, 20, …, 16 from set 7.
 ///
 /// Where the sets' noise dominates, one set's variance grows about as
 /// `1/k` as the kernel narrows, so shrinking it as fast as
@@ -1896,22 +1915,23 @@ mod tests {
         assert_eq!(side, [true]);
     }
 
-    /// The automatic kernel shrinks over a render's sets (64, 32, 21, then
-    /// 16 neighbours), and the radius follows the neighbour count: the
+    /// The automatic kernel shrinks over a render's sets (45, 22, then 16
+    /// neighbours), and the radius follows the neighbour count: the
     /// `k`-th neighbour's median distance for lights in the camera's
     /// windows (lights in a plane: `h ∝ √k`), the light spacing times
-    /// `(k/64)^{1/3}` for lights placed by density. An explicit radius
+    /// `2.5 (k/K)^{1/3}` for lights placed by density (`K` the first
+    /// set's, [`KERNEL_NEIGHBOURS`]). An explicit radius
     /// is kept whatever the set.
     #[test]
     fn the_kernel_shrinks_over_the_sets() {
         let ks: Vec<u32> = (0..6).map(kernel_neighbours_for_set).collect();
-        assert_eq!(ks, [64, 32, 21, 16, 16, 16]);
+        assert_eq!(ks, [45, 22, 16, 16, 16, 16]);
         assert_eq!(kernel_neighbours_for_set(u32::MAX), KERNEL_NEIGHBOURS_FLOOR);
         let noisy: Vec<u32> = [0, 1, 2, 3, 4, 14, 15, 99]
             .into_iter()
             .map(kernel_neighbours_for_noisy_set)
             .collect();
-        assert_eq!(noisy, [64, 45, 36, 32, 28, 16, 16, 16]);
+        assert_eq!(noisy, [45, 31, 25, 22, 20, 16, 16, 16]);
         assert_eq!(
             kernel_neighbours_for_noisy_set(u32::MAX),
             KERNEL_NEIGHBOURS_FLOOR
@@ -1945,12 +1965,13 @@ mod tests {
         assert!(h16 < 0.6 * h64, "{h16} against {h64}");
         // Without weights the spacing is the box's volume per light.
         let spacing = (8.0f32 / lights.len() as f32).cbrt();
-        let dense = radius(64, 0.0, None);
+        let dense = radius(KERNEL_NEIGHBOURS, 0.0, None);
         assert!((dense / (AUTO_KERNEL_FACTOR * spacing) - 1.0).abs() < 1e-5);
-        let dense8 = radius(8, 0.0, None);
+        let dense16 = radius(16, 0.0, None);
+        let want = (16.0 / KERNEL_NEIGHBOURS as f32).cbrt();
         assert!(
-            (dense8 / dense - 0.5).abs() < 1e-5,
-            "{dense8} against {dense}"
+            (dense16 / dense - want).abs() < 1e-5,
+            "{dense16} against {dense}"
         );
         assert_eq!(radius(16, 0.9, Some(0.3)), 0.3);
     }
