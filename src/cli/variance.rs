@@ -64,8 +64,9 @@ pub struct NoiseArgs {
     #[arg(long, default_value_t = 2000)]
     pub walk_count: u32,
     /// Lights the automatic kernel holds in every measured set (a render
-    /// shrinks it from 64 to 16 over its first sets; the sets measured
-    /// here share one kernel, so that their spread is noise alone).
+    /// shrinks it from the first set's 45 to 16 over its sets; the sets
+    /// measured here share one kernel, so that their spread is noise
+    /// alone).
     #[arg(long, default_value_t = KERNEL_NEIGHBOURS, value_parser = clap::value_parser!(u32).range(1..))]
     pub kernel_neighbours: u32,
     /// Internal-lights parameters (default: the scene's).
