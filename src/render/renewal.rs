@@ -1321,18 +1321,14 @@ mod tests {
             );
         }
         assert_eq!(outweigh, Some(true));
+        let shrunk =
+            |sets: usize| -> Vec<u32> { (0..sets as u32).map(kernel_neighbours_for_set).collect() };
+        assert_eq!(shrunk(4), [45, 22, 16, 16]);
         let (quiet_sets, outweigh) = kernels(4.0, 0.25, 0.1, 0.4);
-        let shrunk: Vec<u32> = (0..quiet_sets.len() as u32)
-            .map(kernel_neighbours_for_set)
-            .collect();
-        assert_eq!(quiet_sets, shrunk);
-        assert_eq!(shrunk[..4], [45, 22, 16, 16]);
+        assert_eq!(quiet_sets, shrunk(quiet_sets.len()));
         assert_eq!(outweigh, Some(false));
         let (scaled, outweigh) = kernels(1.0, 0.6, 1.0, 1.0);
-        let shrunk: Vec<u32> = (0..scaled.len() as u32)
-            .map(kernel_neighbours_for_set)
-            .collect();
-        assert_eq!(scaled, shrunk);
+        assert_eq!(scaled, shrunk(scaled.len()));
         assert_eq!(outweigh, Some(false));
     }
 

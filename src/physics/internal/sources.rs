@@ -215,18 +215,11 @@ pub const AUTO_KERNEL_FACTOR: f32 = 2.5;
 /// the note's settings), where points with no light within the kernel
 /// read zero.
 ///
-/// The kernel trades its blur, a bias that stays however many sets are
-/// averaged, against the walks' noise, about `1/k` per set. It held 64
-/// until the sets had grown quieter (walks towards the eye, collision
-/// tails, sets weighed by their noise); at 64 the blur was most of what a
-/// mean of many renders of the cumulus kept (its base band and outline,
-/// 3.8 % of the 8×8 blocks against 5.4 % of noise at 8 s). At 45, rendered
-/// at equal time over the suite, the blocks fell or stayed on six of its
-/// seven media (the sky-lit plume at 2 s 4.64 → 4.34 %, the cumulus at
-/// 8 s 6.61 → 6.32 %) and rose on the thick sphere, whose light is smooth
-/// (2–9 % higher); at 32 the cumulus's blocks fell further but the thick
-/// sphere, the chromatic sphere and the cumulus read up to a sixth noisier
-/// per pixel at 2 s ([validation §3.25](crate::doc::validation)).
+/// The count trades the kernel's blur, a bias no number of sets removes,
+/// against the walks' noise, about `1/k` per set: 64 until the sets grew
+/// quieter, 45 since (why, and what 32 would cost: [method
+/// §6.2](crate::doc::method),
+/// [validation §3.25](crate::doc::validation)).
 pub const KERNEL_NEIGHBOURS: u32 = 45;
 
 /// The fewest lights the automatic kernel holds in any set. With 8 the
