@@ -183,6 +183,9 @@ pub struct BalancedRenewal {
     inverse_lengths: f64,
     /// `Σ n_s²` over the complete sets.
     square_lengths: f64,
+    /// Each complete set's passes, kernel (lights it held) and share of a
+    /// whole set's walks: what [`WeightedSets`] weighs it by.
+    closed: Vec<ClosedSet>,
     /// Time spent in passes and in builds, and their counts: every pass
     /// but the render's first is timed ([`BalancedRenewal::add_pass`]).
     pass_secs: f64,
@@ -223,6 +226,7 @@ impl BalancedRenewal {
             sets: 0,
             inverse_lengths: 0.0,
             square_lengths: 0.0,
+            closed: Vec::new(),
             pass_secs: 0.0,
             timed_passes: 0,
             passes: 0,
@@ -388,16 +392,21 @@ impl BalancedRenewal {
     ///   is below [`MIN_PARTIAL_SHARE`], leaves no time for a pass, or
     ///   cannot be weighed (no estimates yet);
     /// - the set begins where its walks and a whole period fit (the
-    ///   balanced schedule's own choice); in between, the image's
-    ///   predicted variance `a/n + b Σ n_s²/n²` (see
-    ///   [`BalancedRenewal::noise_inflation`]), the fresh set's term
-    ///   `n_s²/share` (a set walked to a share of its walks has about
-    ///   `1/share` of a whole set's walk noise), is compared
-    ///   for the two ways of spending the time, from the estimates of `a`
-    ///   and `b` when the current set began; without them (before two sets
-    ///   are complete) a whole fresh set begins and a partial one does
-    ///   not: where `b` is small (thin smoke at 1–2 s) a partial set only
-    ///   takes passes away (validation §3.19).
+    ///   balanced schedule's own choice); in between, the variance of the
+    ///   image as [`WeightedSets`] will make it, `1/Σ_s 1/v_s` with each
+    ///   set's `v_s = a/n_s + b_K (K/k_s)/f_s` ([`SetNoise`]), is compared
+    ///   for the two ways of spending the time: the current set's passes
+    ///   run on, or it closes and the fresh set (its kernel the schedule's
+    ///   next, its walks `share`) takes the passes that fit after its
+    ///   build; `a` and `b_K` are the estimates of when the current set
+    ///   began. Without them (before two sets are complete) a whole fresh
+    ///   set begins and a partial one does not: where `b` is small (thin
+    ///   smoke at 1–2 s) a partial set only takes passes away (validation
+    ///   §3.19).
+    ///
+    /// (Until the sets were weighed by their noise this predicted the
+    /// passes' mean, `a/n + b Σ n_s²/n²`, in which a fresh set of one or
+    /// two passes counts for little however noisy the sets are.)
     pub fn fresh_set_share(&self, remaining: f64) -> Option<f64> {
         let (c, d) = self.mean_secs();
         let share = if d + c <= remaining {
@@ -416,17 +425,64 @@ impl BalancedRenewal {
         let Some(e) = self.at_set_start else {
             return Some(share);
         };
-        let (a, b) = (e.pass_variance.max(0.0), e.set_variance.max(0.0));
-        let (done, current) = (f64::from(self.passes), f64::from(self.passes_in_set));
-        let variance = |n: f64, squares: f64| a / n + b * squares / (n * n);
-        let kept = (remaining / c).floor();
-        let fresh = ((remaining - share * d) / c).floor().max(1.0);
-        let keeping = variance(done + kept, self.square_lengths + (current + kept).powi(2));
-        let renewing = variance(
-            done + fresh,
-            self.square_lengths + current * current + fresh * fresh / share,
+        let noise = SetNoise {
+            pass_variance: e.pass_variance.max(0.0),
+            set_variance: (e.set_variance / self.narrowing()).max(0.0),
+        };
+        // Passes of at most a few thousand: the casts cannot overflow.
+        let kept = (remaining / c).floor().min(f64::from(u32::MAX)) as u32;
+        let fresh = ((remaining - share * d) / c)
+            .floor()
+            .clamp(1.0, f64::from(u32::MAX)) as u32;
+        let current = self.passes_in_set;
+        let next_kernel = match self.outweigh {
+            Some(true) => kernel_neighbours_for_noisy_set(self.sets + 1),
+            _ => kernel_neighbours_for_set(self.sets + 1),
+        };
+        let keeping = self.weighed_variance(
+            &noise,
+            &[ClosedSet {
+                passes: current + kept,
+                kernel: self.kernel,
+                share: self.planned_share,
+            }],
+        );
+        let renewing = self.weighed_variance(
+            &noise,
+            &[
+                ClosedSet {
+                    passes: current,
+                    kernel: self.kernel,
+                    share: self.planned_share,
+                },
+                ClosedSet {
+                    passes: fresh,
+                    kernel: next_kernel,
+                    share,
+                },
+            ],
         );
         (renewing < keeping).then_some(share)
+    }
+
+    /// The per-pixel variance of the image [`WeightedSets`] makes of the
+    /// complete sets and `more`, each set's mean weighed by the inverse of
+    /// its variance under `noise`: `1/Σ_s 1/v_s`. Where the sets add no
+    /// noise (`b` = 0) it is `a/n`, the passes' mean over all `n` passes.
+    fn weighed_variance(&self, noise: &SetNoise, more: &[ClosedSet]) -> f64 {
+        let inverse: f64 = self
+            .closed
+            .iter()
+            .chain(more)
+            .filter(|s| s.passes > 0)
+            .map(|s| 1.0 / noise.set_mean_variance(s.passes, s.kernel, s.share))
+            .filter(|w| w.is_finite())
+            .sum();
+        if inverse > 0.0 {
+            1.0 / inverse
+        } else {
+            f64::INFINITY
+        }
     }
 
     /// The share of a whole set's walks the current set was planned to
@@ -515,6 +571,11 @@ impl BalancedRenewal {
         self.kernel_factors += f64::from(KERNEL_NEIGHBOURS) / f64::from(self.kernel.max(1));
         self.inverse_lengths += 1.0 / n;
         self.square_lengths += n * n;
+        self.closed.push(ClosedSet {
+            passes: self.passes_in_set,
+            kernel: self.kernel,
+            share: self.planned_share,
+        });
         self.sum.fill(0.0);
         self.squares.fill(0.0);
         self.passes_in_set = 0;
@@ -645,6 +706,15 @@ impl BalancedRenewal {
             mean(self.build_secs, self.builds),
         )
     }
+}
+
+/// A complete light set as [`WeightedSets`] weighs it: its passes, the
+/// lights its kernel held and the share of a whole set's walks it walked.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ClosedSet {
+    passes: u32,
+    kernel: u32,
+    share: f64,
 }
 
 /// The noise model a set's weight comes from ([`BalancedRenewal::set_noise`]).
@@ -898,6 +968,14 @@ mod tests {
         let mut r = BalancedRenewal::new(4, 10);
         r.sets = 3;
         r.square_lengths = 300.0;
+        r.closed = vec![
+            ClosedSet {
+                passes: 10,
+                kernel: KERNEL_NEIGHBOURS,
+                share: 1.0,
+            };
+            3
+        ];
         r.passes = 40;
         r.passes_in_set = 10;
         r.pass_secs = 3.9;
@@ -985,7 +1063,8 @@ mod tests {
     /// and 8 passes, `b = a`), the sets weighed by their noise keep the
     /// image's mean and leave less variance than the passes' mean, as the
     /// model says: `1/Σ(1/v_s)` = 0.45 against `Σ (n_s/n)² v_s` = 0.583,
-    /// with `v_s = a/n_s + b`. 4000 images of one pixel each, within 10 %.
+    /// with `v_s = a/n_s + b`. 4000 images of one pixel each, within 10 %;
+    /// the schedule's prediction near a time limit is the same 0.45.
     #[test]
     fn weighed_sets_keep_the_mean_and_lower_the_variance() {
         let noise = SetNoise {
@@ -995,11 +1074,11 @@ mod tests {
         let mut rng = Rng::for_sample(17, 0, 0);
         let (mut weighed, mut by_passes) = (Vec::new(), Vec::new());
         for _ in 0..4000 {
-            let mut sets = WeightedSets::new(1, 64, 1.0);
+            let mut sets = WeightedSets::new(1, KERNEL_NEIGHBOURS, 1.0);
             let mut all = 0.0;
             for (s, n) in [2u32, 2, 8].into_iter().enumerate() {
                 if s > 0 {
-                    sets.next_set(Some(noise), 64, 1.0);
+                    sets.next_set(Some(noise), KERNEL_NEIGHBOURS, 1.0);
                 }
                 let effect = normal(&mut rng);
                 for _ in 0..n {
@@ -1022,24 +1101,39 @@ mod tests {
             assert!((m - 1.0).abs() < 4.0 * (v / 4000.0).sqrt(), "mean {m}");
         }
         assert!((vw / 0.45 - 1.0).abs() < 0.1, "weighed variance {vw}");
+        // What a schedule predicts for the same sets, near a time limit
+        // (`BalancedRenewal::fresh_set_share`), is that variance.
+        let set = |passes| ClosedSet {
+            passes,
+            kernel: KERNEL_NEIGHBOURS,
+            share: 1.0,
+        };
+        let mut schedule = BalancedRenewal::new(1, 2);
+        schedule.closed = vec![set(2), set(2)];
+        let predicted = schedule.weighed_variance(&noise, &[set(8)]);
+        assert!((predicted - 0.45).abs() < 1e-12, "predicted {predicted}");
         assert!((vp / 0.583 - 1.0).abs() < 0.1, "passes' variance {vp}");
     }
 
     /// Near a time limit a fresh set begins only if it pays: always where
-    /// its build and its period fit, by the predicted variance where only
-    /// its build and a pass do, and where not even those fit, walked to a
-    /// share of its walks (¾ of the time left over a whole set's build) if
-    /// that share is at least half and pays. With 1.5 s left, running on
-    /// gives 15 more passes of the current set (`a/55 + 925 b/55²`), a
-    /// fresh set 5 passes of its own (`a/45 + 425 b/45²`): the fresh set
-    /// pays where `b/a` > 0.042. With 1.05 s left a whole set and a pass
-    /// do not fit; a set walked to 0.7875 of its walks leaves 2 passes
-    /// (`a/42 + (400 + 4/0.7875) b/42²` against `a/50 + 700 b/50²`): it
-    /// pays where `b/a` is 0.1, not where it is 0.01. With 0.6 s left the
-    /// share would be 0.45.
+    /// its build and its period fit, by the predicted variance of the
+    /// weighed sets where only its build and a pass do, and where not even
+    /// those fit, walked to a share of its walks (¾ of the time left over a
+    /// whole set's build) if that share is at least half and pays. Three
+    /// sets of ten passes and a fourth with its ten, all of 45 lights (`a`
+    /// = 1): with 1.5 s left, running on gives the fourth set 15 more
+    /// passes (`v = 1/25 + b`), a fresh set, whose kernel holds 16 lights,
+    /// 5 passes of its own (`1/5 + 2.8125 b`); the weighed sets' variance
+    /// `1/Σ 1/v_s` is lower with the fresh set where `b` is 0.3 (0.0913
+    /// against 0.0958), not where it is 0.01 (0.0245 against 0.0212).
+    /// With 1.05 s left a whole set and a pass do not fit; a set walked to
+    /// 0.7875 of its walks leaves 2 passes (`1/2 + 2.8125 b / 0.7875`
+    /// against 10 more passes of the fourth set): it pays at 0.3 (0.0940
+    /// against 0.0966), not at 0.01. With 0.6 s left the share would be
+    /// 0.45.
     #[test]
     fn a_fresh_set_begins_near_the_limit_only_where_it_pays() {
-        let noisy_sets = mid_render(0.1);
+        let noisy_sets = mid_render(0.3);
         let quiet_sets = mid_render(0.01);
         for r in [&noisy_sets, &quiet_sets] {
             assert_eq!(
@@ -1051,6 +1145,12 @@ mod tests {
         }
         assert_eq!(noisy_sets.fresh_set_share(1.5), Some(1.0));
         assert_eq!(quiet_sets.fresh_set_share(1.5), None);
+        // At `b` 0.1 the passes' mean, `a/n + b Σn_s²/n²`, would have
+        // renewed (`a/45 + 425 b/45²` against `a/55 + 925 b/55²`), but in
+        // the weighed image the fresh set's five noisier passes add less
+        // than fifteen more passes of the set in hand (0.04529 against
+        // 0.04516).
+        assert_eq!(mid_render(0.1).fresh_set_share(1.5), None);
         let partial = noisy_sets.fresh_set_share(1.05);
         assert!(
             partial.is_some_and(|f| (f - 0.7875).abs() < 1e-12),
@@ -1063,7 +1163,7 @@ mod tests {
         assert!(limited.next_starts_set_within(None));
         assert_eq!((limited.passes_in_set, limited.sets), (0, 4));
         assert_eq!(limited.planned_share(), 1.0);
-        let mut unmeasured = mid_render(0.1);
+        let mut unmeasured = mid_render(0.3);
         unmeasured.at_set_start = None;
         assert_eq!(
             unmeasured.fresh_set_share(1.05),
@@ -1071,7 +1171,7 @@ mod tests {
             "no estimates: runs on"
         );
         assert_eq!(unmeasured.fresh_set_share(1.5), Some(1.0));
-        let mut cut = mid_render(0.1);
+        let mut cut = mid_render(0.3);
         assert!(cut.next_starts_set_within(Some(1.05)));
         assert!((cut.planned_share() - 0.7875).abs() < 1e-12);
         let start = Instant::now();
