@@ -2164,6 +2164,7 @@ fn equal_time_on_the_gpu_measures_both_methods_at_each_time() {
         threads: Some(1),
         backend: Backend::Gpu,
         seed: 5,
+        seeds: 1,
         out: dir.path().join("out"),
         fixed_renewal: false,
         internal: InternalArgs {

@@ -31,8 +31,14 @@
 //!   per-pixel variance of the mean (`NAME_var.exr`), or of its block
 //!   means' variance `Σ Var / 64²`, is subtracted (clamped at 0).
 //!
+//! With `--seeds N` each method renders `N` times at each time (seeds
+//! `seed`, `seed + 2`, …; the reference's one more), and the table gives
+//! the mean of the signed mean errors and the root mean square of the
+//! RMSEs over them: one render's blocks on a thick cloud vary by a tenth
+//! from seed to seed, more than most changes measured with this command.
+//!
 //! Output: a Markdown table per scene on stdout, and `report.md` and
-//! `report.csv` in `--out`.
+//! `report.csv` (a row per render, with its seed) in `--out`.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -87,6 +93,13 @@ pub struct EqualTimeArgs {
     /// seed + 1); both must differ from the converged image's.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Renders of each method at each time, with seeds `seed`, `seed + 2`,
+    /// … (the reference's one more): the table then gives the mean of the
+    /// mean errors and the root mean square of the RMSEs over them, and
+    /// the CSV a row per render. One render's blocks on a thick cloud
+    /// vary by a tenth from seed to seed.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    pub seeds: u32,
     /// Output folder for report.md and report.csv.
     #[arg(long, default_value = "target/equal-time")]
     pub out: PathBuf,
@@ -422,7 +435,7 @@ pub fn run(args: &EqualTimeArgs) -> Result<()> {
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let mut report = String::new();
     let mut csv = String::from(
-        "scene,method,target_s,secs,spp,mean_err_r,mean_err_g,mean_err_b,block_rmse,pixel_rmse\n",
+        "scene,method,target_s,secs,spp,mean_err_r,mean_err_g,mean_err_b,block_rmse,pixel_rmse,seed\n",
     );
     let ctx = match args.backend {
         Backend::Cpu => None,
@@ -462,14 +475,20 @@ fn scene_report(
 
     let mut internal = prepared.scene.render.clone();
     internal.method = Method::Internal;
-    internal.seed = args.seed;
     args.internal.apply(&mut internal.internal);
     internal.internal.validate(scene)?;
     let mut reference = internal.clone();
     reference.method = Method::Reference;
-    reference.seed = args.seed.wrapping_add(1);
+    // The seeds of each render: the internal lights `seed + 2k`, the
+    // reference one more.
+    let seeds: Vec<(u64, u64)> = (0..u64::from(args.seeds))
+        .map(|k| {
+            let s = args.seed.wrapping_add(2 * k);
+            (s, s.wrapping_add(1))
+        })
+        .collect();
     if let Some(s) = converged.seed {
-        if s == internal.seed || s == reference.seed {
+        if seeds.iter().any(|&(i, r)| s == i || s == r) {
             bail!(
                 "{stem}: the converged reference was rendered with seed {s}; choose another --seed"
             );
@@ -495,16 +514,38 @@ fn scene_report(
             gpu_render_to(ctx, &prepared, settings, times, &truth, &label, balanced)
         }),
     };
-    let internal_snapshots = measure(&internal, times, format!("{stem} internal"))?;
-    let spent: Vec<f64> = internal_snapshots.iter().map(|s| s.secs).collect();
-    let mut reference_snapshots = measure(&reference, &spent, format!("{stem} reference"))?;
-    for (r, &t) in reference_snapshots.iter_mut().zip(times) {
-        r.target = t;
+    // Per seed, the reference's snapshots and the internal lights'.
+    let mut renders = Vec::with_capacity(seeds.len());
+    for &(internal_seed, reference_seed) in &seeds {
+        internal.seed = internal_seed;
+        reference.seed = reference_seed;
+        let internal_snapshots = measure(
+            &internal,
+            times,
+            format!("{stem} internal (seed {internal_seed})"),
+        )?;
+        let spent: Vec<f64> = internal_snapshots.iter().map(|s| s.secs).collect();
+        let mut reference_snapshots = measure(
+            &reference,
+            &spent,
+            format!("{stem} reference (seed {reference_seed})"),
+        )?;
+        for (r, &t) in reference_snapshots.iter_mut().zip(times) {
+            r.target = t;
+        }
+        renders.push([reference_snapshots, internal_snapshots]);
     }
-    let runs = [
-        ("reference", reference_snapshots),
-        ("internal", internal_snapshots),
-    ];
+    // The table's rows: each method at each time, pooled over the seeds.
+    let runs: Vec<(&str, Vec<Snapshot>)> = ["reference", "internal"]
+        .into_iter()
+        .enumerate()
+        .map(|(m, name)| {
+            let pooled = (0..times.len())
+                .map(|k| pool(&renders.iter().map(|r| r[m][k]).collect::<Vec<_>>()))
+                .collect();
+            (name, pooled)
+        })
+        .collect();
 
     let (pixel_noise, block_noise, mean_se) = own_noise(&converged);
     let i = &internal.internal;
@@ -513,10 +554,20 @@ fn scene_report(
         Some(ctx) => format!("GPU ({})", ctx.describe()),
     };
     let mut md = String::new();
+    let over = match seeds.as_slice() {
+        [(i, r)] => format!("seed {i} (the reference {r})"),
+        _ => format!(
+            "{} renders of each, seeds {} … {} (the reference's one more): the mean of their mean errors, the root mean square of their RMSEs",
+            seeds.len(),
+            seeds[0].0,
+            seeds[seeds.len() - 1].0
+        ),
+    };
     let _ = writeln!(
         md,
         "\n### {stem} {w}×{h}, {renderers}: equal time against the converged reference\n"
     );
+    let _ = writeln!(md, "{over}\n");
     let _ = writeln!(
         md,
         "converged reference {} ({} spp): its own noise (median relative standard error over the brighter pixels) {:.2} % per pixel, {:.2} % per 8×8 block, removed from the RMSEs; its image mean ±{:.3} / {:.3} / {:.3} % (R/G/B, not removed)\n",
@@ -546,7 +597,6 @@ fn scene_report(
         "| method | T s | spent s | spp | mean err R | mean err G | mean err B | 8×8 block RMSE | pixel RMSE | targets (mean ≤ 3 %, block ≤ 5 %, pixel < reference) |"
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|---|---|---|---|");
-    let mut rows = String::new();
     for (k, &target) in times.iter().enumerate() {
         for (name, snaps) in &runs {
             let s = snaps[k];
@@ -574,14 +624,47 @@ fn scene_report(
                 100.0 * e.block,
                 100.0 * e.pixel,
             );
-            let _ = writeln!(
-                rows,
-                "{stem},{name},{target},{:.4},{},{:.6},{:.6},{:.6},{:.6},{:.6}",
-                s.secs, s.spp, e.mean.x, e.mean.y, e.mean.z, e.block, e.pixel
-            );
+        }
+    }
+    let mut rows = String::new();
+    for (render, &(internal_seed, reference_seed)) in renders.iter().zip(&seeds) {
+        for (k, &target) in times.iter().enumerate() {
+            for (name, snaps, seed) in [
+                ("reference", &render[0], reference_seed),
+                ("internal", &render[1], internal_seed),
+            ] {
+                let (s, e) = (snaps[k], snaps[k].errors);
+                let _ = writeln!(
+                    rows,
+                    "{stem},{name},{target},{:.4},{},{:.6},{:.6},{:.6},{:.6},{:.6},{seed}",
+                    s.secs, s.spp, e.mean.x, e.mean.y, e.mean.z, e.block, e.pixel
+                );
+            }
         }
     }
     Ok((md, rows))
+}
+
+/// One method's snapshots at one time over several seeds, as the table
+/// gives them: the mean of the seconds, the spp and the signed mean
+/// errors, the root mean square of the block and pixel RMSEs (what one
+/// render's RMSE is in the mean square). One snapshot is itself.
+fn pool(snaps: &[Snapshot]) -> Snapshot {
+    let n = snaps.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&Snapshot) -> f64| snaps.iter().map(f).sum::<f64>() / n;
+    let rms =
+        |f: &dyn Fn(&Snapshot) -> f32| mean(&|s: &Snapshot| f64::from(f(s)).powi(2)).sqrt() as f32;
+    let first = snaps.first().map_or(0.0, |s| s.target);
+    Snapshot {
+        target: first,
+        secs: mean(&|s| s.secs),
+        spp: mean(&|s| f64::from(s.spp)).round() as u32,
+        errors: Errors {
+            mean: snaps.iter().map(|s| s.errors.mean).sum::<Vec3>() / n as f32,
+            block: rms(&|s| s.errors.block),
+            pixel: rms(&|s| s.errors.pixel),
+        },
+    }
 }
 
 #[cfg(test)]
@@ -649,6 +732,7 @@ mod tests {
             threads: Some(1),
             backend: Backend::Cpu,
             seed: 5,
+            seeds: 1,
             out: dir.path().join("out"),
             fixed_renewal: false,
             internal: InternalArgs {
@@ -696,8 +780,74 @@ mod tests {
             md.contains("| internal | 0.4 |") && md.contains("8×8 block RMSE"),
             "{md}"
         );
-        // The converged image's seed is refused for the renders.
-        let same = EqualTimeArgs { seed: 99, ..args };
+        // The converged image's seed is refused for the renders, also
+        // where it is one of several (97 and 99, the references 98 and 100).
+        let same = EqualTimeArgs {
+            seed: 99,
+            ..args.clone()
+        };
         assert!(run(&same).is_err());
+        let among = EqualTimeArgs {
+            seed: 97,
+            seeds: 2,
+            ..args.clone()
+        };
+        assert!(run(&among).is_err());
+        // Two seeds: a CSV row per render, each with its seed, and the
+        // table says what it pools.
+        let two = EqualTimeArgs {
+            seeds: 2,
+            times: vec![0.1],
+            ..args
+        };
+        run(&two).unwrap();
+        let csv = std::fs::read_to_string(dir.path().join("out/report.csv")).unwrap();
+        let seeds: Vec<(&str, &str)> = csv
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let r: Vec<&str> = l.split(',').collect();
+                (r[1], r[10])
+            })
+            .collect();
+        assert_eq!(
+            seeds,
+            [
+                ("reference", "6"),
+                ("internal", "5"),
+                ("reference", "8"),
+                ("internal", "7")
+            ],
+            "{csv}"
+        );
+        let md = std::fs::read_to_string(dir.path().join("out/report.md")).unwrap();
+        assert!(md.contains("2 renders of each, seeds 5 … 7"), "{md}");
+    }
+
+    /// Snapshots over seeds pool as the table gives them: the mean of the
+    /// signed mean errors, the root mean square of the RMSEs.
+    #[test]
+    fn snapshots_over_seeds_pool_by_mean_and_root_mean_square() {
+        let snap = |secs: f64, spp: u32, mean: f32, block: f32, pixel: f32| Snapshot {
+            target: 2.0,
+            secs,
+            spp,
+            errors: Errors {
+                mean: Vec3::splat(mean),
+                block,
+                pixel,
+            },
+        };
+        let p = pool(&[
+            snap(2.0, 4, 0.02, 0.03, 0.1),
+            snap(2.2, 5, -0.01, 0.04, 0.2),
+        ]);
+        assert_eq!((p.target, p.spp), (2.0, 5));
+        assert!((p.secs - 2.1).abs() < 1e-12);
+        assert!((p.errors.mean - Vec3::splat(0.005)).abs().max_element() < 1e-7);
+        assert!((p.errors.block - 0.035355).abs() < 1e-5);
+        assert!((p.errors.pixel - 0.158114).abs() < 1e-5);
+        let one = snap(2.0, 4, 0.02, 0.03, 0.1);
+        assert_eq!(pool(&[one]), one);
     }
 }
