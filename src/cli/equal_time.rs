@@ -481,7 +481,8 @@ fn scene_report(
     reference.method = Method::Reference;
     // The seeds of each render: the internal lights `seed + 2k`, the
     // reference one more.
-    let seeds: Vec<(u64, u64)> = (0..u64::from(args.seeds))
+    // (At least one: `--seeds` refuses 0, and so does this.)
+    let seeds: Vec<(u64, u64)> = (0..u64::from(args.seeds.max(1)))
         .map(|k| {
             let s = args.seed.wrapping_add(2 * k);
             (s, s.wrapping_add(1))
