@@ -652,18 +652,15 @@ fn scene_report(
 /// render's RMSE is in the mean square). One snapshot is itself.
 fn pool(snaps: &[Snapshot]) -> Snapshot {
     let n = snaps.len().max(1) as f64;
-    let mean = |f: &dyn Fn(&Snapshot) -> f64| snaps.iter().map(f).sum::<f64>() / n;
-    let rms =
-        |f: &dyn Fn(&Snapshot) -> f32| mean(&|s: &Snapshot| f64::from(f(s)).powi(2)).sqrt() as f32;
-    let first = snaps.first().map_or(0.0, |s| s.target);
+    let mean = |f: fn(&Snapshot) -> f64| snaps.iter().map(f).sum::<f64>() / n;
     Snapshot {
-        target: first,
-        secs: mean(&|s| s.secs),
-        spp: mean(&|s| f64::from(s.spp)).round() as u32,
+        target: snaps.first().map_or(0.0, |s| s.target),
+        secs: mean(|s| s.secs),
+        spp: mean(|s| f64::from(s.spp)).round() as u32,
         errors: Errors {
             mean: snaps.iter().map(|s| s.errors.mean).sum::<Vec3>() / n as f32,
-            block: rms(&|s| s.errors.block),
-            pixel: rms(&|s| s.errors.pixel),
+            block: mean(|s| f64::from(s.errors.block).powi(2)).sqrt() as f32,
+            pixel: mean(|s| f64::from(s.errors.pixel).powi(2)).sqrt() as f32,
         },
     }
 }

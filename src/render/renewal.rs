@@ -176,15 +176,13 @@ pub struct BalancedRenewal {
     within: f64,
     within_dof: f64,
     /// Per pixel the sum and the sum of squares of the complete sets'
-    /// means; the sets and `Σ 1/n_s`.
+    /// means.
     set_means: Vec<f64>,
     set_mean_squares: Vec<f64>,
-    sets: u32,
-    inverse_lengths: f64,
-    /// `Σ n_s²` over the complete sets.
-    square_lengths: f64,
     /// Each complete set's passes, kernel (lights it held) and share of a
-    /// whole set's walks: what [`WeightedSets`] weighs it by.
+    /// whole set's walks: what [`WeightedSets`] weighs it by, and what the
+    /// noise model's sums over the sets (`Σ 1/n_s`, `Σ n_s²`, `Σ K/k_s`)
+    /// come from.
     closed: Vec<ClosedSet>,
     /// Time spent in passes and in builds, and their counts: every pass
     /// but the render's first is timed ([`BalancedRenewal::add_pass`]).
@@ -193,10 +191,8 @@ pub struct BalancedRenewal {
     passes: u32,
     build_secs: f64,
     builds: u32,
-    /// The current set's kernel (lights it holds) and, over the complete
-    /// sets, the sum of [`KERNEL_NEIGHBOURS`] over their kernels.
+    /// The current set's kernel (lights it holds).
     kernel: u32,
-    kernel_factors: f64,
     /// [`BalancedRenewal::sets_outweigh_passes`] as decided for the
     /// current set.
     outweigh: Option<bool>,
@@ -223,9 +219,6 @@ impl BalancedRenewal {
             within_dof: 0.0,
             set_means: vec![0.0; pixels],
             set_mean_squares: vec![0.0; pixels],
-            sets: 0,
-            inverse_lengths: 0.0,
-            square_lengths: 0.0,
             closed: Vec::new(),
             pass_secs: 0.0,
             timed_passes: 0,
@@ -233,7 +226,6 @@ impl BalancedRenewal {
             build_secs: 0.0,
             builds: 0,
             kernel: kernel_neighbours_for_set(0),
-            kernel_factors: 0.0,
             outweigh: None,
             at_set_start: None,
             planned_share: 1.0,
@@ -259,7 +251,13 @@ impl BalancedRenewal {
 
     /// Sets complete so far.
     pub fn complete_sets(&self) -> u32 {
-        self.sets
+        // Sets of a render: far fewer than `u32::MAX`.
+        self.closed.len() as u32
+    }
+
+    /// `Σ f(s)` over the complete sets.
+    fn sum_over_sets(&self, f: impl Fn(&ClosedSet) -> f64) -> f64 {
+        self.closed.iter().map(f).sum()
     }
 
     /// Adds one pass of the current set: its image (one value per pixel)
@@ -344,15 +342,12 @@ impl BalancedRenewal {
         // One pass over the pixels for both choices: the period waits for
         // more sets than the kernel.
         let estimates = self.estimates_after(SETS_BEFORE_KERNEL);
-        if let Some(e) = estimates.filter(|_| self.sets >= SETS_BEFORE_BALANCING) {
+        if let Some(e) = estimates.filter(|_| self.complete_sets() >= SETS_BEFORE_BALANCING) {
             self.period = e.best_period();
         }
         self.outweigh = estimates.map(|e| self.outweighs(&e));
         self.at_set_start = estimates;
-        self.kernel = match self.outweigh {
-            Some(true) => kernel_neighbours_for_noisy_set(self.sets),
-            _ => kernel_neighbours_for_set(self.sets),
-        };
+        self.kernel = self.scheduled_kernel(self.complete_sets());
         self.planned_share = share;
         true
     }
@@ -435,10 +430,7 @@ impl BalancedRenewal {
             .floor()
             .clamp(1.0, f64::from(u32::MAX)) as u32;
         let current = self.passes_in_set;
-        let next_kernel = match self.outweigh {
-            Some(true) => kernel_neighbours_for_noisy_set(self.sets + 1),
-            _ => kernel_neighbours_for_set(self.sets + 1),
-        };
+        let next_kernel = self.scheduled_kernel(self.complete_sets() + 1);
         let keeping = self.weighed_variance(
             &noise,
             &[ClosedSet {
@@ -524,6 +516,16 @@ impl BalancedRenewal {
         self.kernel
     }
 
+    /// The kernel set `set` (from 0) holds under the current decision
+    /// whether the sets outweigh the passes: the slow schedule where they
+    /// do, the fixed one otherwise.
+    fn scheduled_kernel(&self, set: u32) -> u32 {
+        match self.outweigh {
+            Some(true) => kernel_neighbours_for_noisy_set(set),
+            _ => kernel_neighbours_for_set(set),
+        }
+    }
+
     /// Whether the light sets add more noise to the image than the passes
     /// at the balanced period, `b d ≥ a c` (`b P* ≥ a` at `P* = √(ad/(bc))`:
     /// the set variance `b/n` of the mean of `n` sets against the passes'
@@ -567,10 +569,6 @@ impl BalancedRenewal {
             self.set_mean_squares[i] += m * m;
         }
         self.within_dof += pixels as f64 * (n - 1.0);
-        self.sets += 1;
-        self.kernel_factors += f64::from(KERNEL_NEIGHBOURS) / f64::from(self.kernel.max(1));
-        self.inverse_lengths += 1.0 / n;
-        self.square_lengths += n * n;
         self.closed.push(ClosedSet {
             passes: self.passes_in_set,
             kernel: self.kernel,
@@ -602,7 +600,7 @@ impl BalancedRenewal {
         }
         let (a, b) = (e.pass_variance, e.set_variance.max(0.0));
         let current = f64::from(self.passes_in_set);
-        let squares = self.square_lengths + current * current;
+        let squares = self.sum_over_sets(|s| f64::from(s.passes).powi(2)) + current * current;
         let truth = a + b * squares / n;
         let spread = a + b * (n - squares / n) / (n - 1.0);
         (spread > 0.0 && truth.is_finite()).then(|| (truth / spread).max(1.0))
@@ -634,7 +632,9 @@ impl BalancedRenewal {
     /// of [`KERNEL_NEIGHBOURS`] lights: the mean of `K/k` over them (a set's
     /// noise grows as `1/k`), at least 1.
     fn narrowing(&self) -> f64 {
-        (self.kernel_factors / f64::from(self.sets.max(1))).max(1.0)
+        let factors =
+            self.sum_over_sets(|s| f64::from(KERNEL_NEIGHBOURS) / f64::from(s.kernel.max(1)));
+        (factors / f64::from(self.complete_sets().max(1))).max(1.0)
     }
 
     /// [`BalancedRenewal::set_noise`] as if the current set closed now
@@ -665,7 +665,7 @@ impl BalancedRenewal {
 
     /// [`BalancedRenewal::estimates`] once `sets` sets are complete.
     fn estimates_after(&self, sets: u32) -> Option<RenewalEstimates> {
-        if self.sets < sets.max(2)
+        if self.complete_sets() < sets.max(2)
             || self.within_dof <= 0.0
             || self.builds == 0
             || self.timed_passes == 0
@@ -673,7 +673,7 @@ impl BalancedRenewal {
         {
             return None;
         }
-        let k = f64::from(self.sets);
+        let k = f64::from(self.complete_sets());
         let a = self.within / self.within_dof;
         let spread: f64 = self
             .set_means
@@ -685,7 +685,7 @@ impl BalancedRenewal {
         let (pass_secs, set_secs) = self.mean_secs();
         Some(RenewalEstimates {
             pass_variance: a,
-            set_variance: spread - a * self.inverse_lengths / k,
+            set_variance: spread - a * self.sum_over_sets(|s| 1.0 / f64::from(s.passes)) / k,
             pass_secs,
             set_secs,
         })
@@ -966,8 +966,6 @@ mod tests {
     /// and estimates `a` = 1 and `b`.
     fn mid_render(b: f64) -> BalancedRenewal {
         let mut r = BalancedRenewal::new(4, 10);
-        r.sets = 3;
-        r.square_lengths = 300.0;
         r.closed = vec![
             ClosedSet {
                 passes: 10,
@@ -1161,7 +1159,7 @@ mod tests {
         assert!(!limited.next_starts_set_within(Some(1.5)));
         assert_eq!(limited.passes_in_set, 10, "the set runs on");
         assert!(limited.next_starts_set_within(None));
-        assert_eq!((limited.passes_in_set, limited.sets), (0, 4));
+        assert_eq!((limited.passes_in_set, limited.complete_sets()), (0, 4));
         assert_eq!(limited.planned_share(), 1.0);
         let mut unmeasured = mid_render(0.3);
         unmeasured.at_set_start = None;
