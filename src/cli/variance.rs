@@ -12,13 +12,18 @@
 //!   and the *same* pixel random streams (those of pass 0), so that what
 //!   differs between passes is mostly the lights' walk noise. What only
 //!   renewed sets average away (`resample_every`).
-//! - **Walk statistics**: for the first lights of set 0, many time-gated
-//!   walks each (§4) starting towards the camera, and the distribution of
+//! - **Walk statistics**: for lights of set 0 spread over those within the
+//!   camera's reach, many walks each towards the camera, as the renderer
+//!   runs them (§5.4, collision tails included), and the distribution of
 //!   what each carried through a collision (the part `L₀` reconstructs):
-//!   its relative variance per walk, the fraction of walks that carried
-//!   nothing and the share of the mean carried by the top 1 % of walks.
-//!   A heavy tail there is noise that no kernel or SH order removes, only
-//!   more walks.
+//!   its relative variance per walk (averaged over the lights, and pooled
+//!   as the image weighs them, bright lights most), the fraction of walks
+//!   that carried nothing, the share of the mean carried by the top 1 %
+//!   of walks, and how the mean and the variance split by the number of
+//!   collisions a walk made before each reading. A heavy tail there is
+//!   noise that no kernel or SH order removes, only more walks; value
+//!   that comes after tens of collisions is light diffused through the
+//!   medium, which no guiding of the first turns reaches.
 //!
 //! With the time per set and per pass this gives each source's variance
 //! per second, the currency of an equal-error comparison (`lantern
@@ -39,7 +44,9 @@ use super::support::{load_square, walk_split_text};
 use crate::cpu::pixel_ray;
 use crate::physics::internal::clock::GateSettings;
 use crate::physics::internal::gather::{gather, GatherSample};
-use crate::physics::internal::sources::{InternalLights, InternalParams, KERNEL_NEIGHBOURS};
+use crate::physics::internal::sources::{
+    within_view_reach, InternalLights, InternalParams, KERNEL_NEIGHBOURS,
+};
 use crate::physics::internal::walk::Walks;
 use crate::physics::reference::RR_START_DEPTH;
 use crate::physics::rng::Rng;
@@ -57,7 +64,8 @@ pub struct NoiseArgs {
     /// Passes of each of the two image measurements (at least 2).
     #[arg(long, default_value_t = 8)]
     pub passes: u32,
-    /// Lights whose walks are measured one by one (0: skip).
+    /// Lights within the camera's reach whose walks towards it are
+    /// measured one by one, spread evenly over them (0: skip).
     #[arg(long, default_value_t = 64)]
     pub walk_lights: u32,
     /// Walks per measured light.
@@ -201,71 +209,161 @@ fn part_noise(
     })
 }
 
-/// Walk statistics of the first `count` lights of `cache` with density
-/// (each `walks` walks towards `eye`), averaged over the lights whose mean
-/// is positive; `None` if none is.
+/// Where [`light_walk_stats`] splits a walk's readings by the real
+/// collisions the walk made before them: band `b` holds the readings
+/// after `COLLISION_BANDS[b]` collisions up to the next band's first
+/// (1, 2, 3–5, 6–9, 10–19, 20–49, 50–99, 100 and more).
+pub const COLLISION_BANDS: [u32; 8] = [1, 2, 3, 6, 10, 20, 50, 100];
+
+/// The band of [`COLLISION_BANDS`] a reading after `collisions` real
+/// collisions falls in.
+pub fn collision_band(collisions: u32) -> usize {
+    COLLISION_BANDS
+        .iter()
+        .rposition(|&c| collisions >= c)
+        .unwrap_or(0)
+}
+
+/// One light's walks: each walk's value split over [`COLLISION_BANDS`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BandMoments {
+    /// The mean over the walks of each band's part of a walk's value.
+    pub mean: [f64; 8],
+    /// Each band's covariance with the walk's whole value: they add up to
+    /// the value's variance, each band's share of it.
+    pub covariance: [f64; 8],
+}
+
+/// [`BandMoments`] of walks whose values are split as `split` (one row of
+/// bands per walk).
+pub fn band_moments(split: &[[f64; 8]]) -> BandMoments {
+    let n = split.len().max(1) as f64;
+    let totals: Vec<f64> = split.iter().map(|b| b.iter().sum()).collect();
+    let total_mean = totals.iter().sum::<f64>() / n;
+    let mut m = BandMoments::default();
+    for b in 0..8 {
+        m.mean[b] = split.iter().map(|w| w[b]).sum::<f64>() / n;
+        m.covariance[b] = split
+            .iter()
+            .zip(&totals)
+            .map(|(w, t)| (w[b] - m.mean[b]) * (t - total_mean))
+            .sum::<f64>()
+            / n;
+    }
+    m
+}
+
+/// Walk statistics of the walks towards the eye, pooled over the measured
+/// lights.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WalkReport {
+    /// Lights measured.
+    pub lights: usize,
+    /// The lights' [`WalkStats`], averaged (each light's relative
+    /// variance weighs alike, however dim the light).
+    pub per_light: WalkStats,
+    /// `Σ Var / Σ mean²` over the lights: the relative variance of a walk
+    /// as it weighs in the image, where bright lights count most.
+    pub pooled_relative_variance: f64,
+    /// The share of the lights' summed means in each band of
+    /// [`COLLISION_BANDS`].
+    pub mean_share: [f64; 8],
+    /// The share of the lights' summed variances in each band (a band's
+    /// covariance with the whole value; a share can be negative).
+    pub variance_share: [f64; 8],
+}
+
+/// Statistics of the walks towards `eye` that the renderer runs
+/// ([`Walks::collided_readings`]: collision tails included), `walks` at
+/// each of `count` lights of `cache` spread evenly over those within the
+/// camera's reach (the lights that run such walks); `None` if no light's
+/// mean is positive.
 pub fn light_walk_stats(
     prepared: &PreparedScene,
     cache: &InternalLights,
     eye: Vec3,
     count: usize,
     walks: u32,
-) -> Option<(usize, WalkStats)> {
+) -> Option<WalkReport> {
     let gate = GateSettings {
         s_star: cache.s_star,
         n_terms: cache.params.terms,
         clock: cache.params.clock,
         rr_start: RR_START_DEPTH,
     };
-    let gates = gate.term_slots();
-    let stats: Vec<WalkStats> = cache
-        .lights
-        .iter()
-        .enumerate()
-        .filter(|(_, l)| l.density > 0.0)
-        .take(count)
-        .collect::<Vec<_>>()
+    let walker = Walks::guided(&prepared.volume, &prepared.lights, gate);
+    let reach = within_view_reach(
+        &prepared.volume,
+        &cache.params,
+        cache.kernel_radius,
+        &cache.lights,
+    );
+    let reached: Vec<usize> = (0..cache.lights.len())
+        .filter(|&i| reach[i] && cache.lights[i].density > 0.0)
+        .collect();
+    let count = count.min(reached.len());
+    if count == 0 {
+        return None;
+    }
+    let chosen: Vec<usize> = (0..count)
+        .map(|j| reached[j * reached.len() / count])
+        .collect();
+    let grey = |v: Vec3| f64::from(v.x + v.y + v.z) / 3.0;
+    let lights: Vec<(WalkStats, f64, BandMoments)> = chosen
         .into_par_iter()
-        .filter_map(|(i, light)| {
+        .filter_map(|i| {
+            let light = &cache.lights[i];
             let n = (eye - light.position).normalize_or_zero();
             if n == Vec3::ZERO {
                 return None;
             }
             let mut rng = Rng::for_sample(cache.params.seed ^ 0x5eed, i as u32, 0);
-            let mut out = vec![Vec3::ZERO; gates];
-            let mut unscattered = vec![Vec3::ZERO; gates];
-            let values: Vec<f64> = (0..walks)
+            let split: Vec<[f64; 8]> = (0..walks)
                 .map(|_| {
-                    out.iter_mut().for_each(|v| *v = Vec3::ZERO);
-                    unscattered.iter_mut().for_each(|v| *v = Vec3::ZERO);
-                    Walks::guided(&prepared.volume, &prepared.lights, gate).accumulate_j_from(
-                        light.position,
-                        n,
-                        1,
-                        &mut rng,
-                        &mut out,
-                        Some(&mut unscattered),
-                    );
-                    let collided: Vec3 =
-                        out[1..].iter().sum::<Vec3>() - unscattered[1..].iter().sum::<Vec3>();
-                    f64::from(collided.x + collided.y + collided.z) / 3.0
+                    let mut bands = [0.0f64; 8];
+                    walker.collided_readings(light.position, n, &mut rng, |c, v| {
+                        bands[collision_band(c)] += grey(v);
+                    });
+                    bands
                 })
                 .collect();
-            walk_stats(&values)
+            let values: Vec<f64> = split.iter().map(|b| b.iter().sum()).collect();
+            let stats = walk_stats(&values)?;
+            let moments = band_moments(&split);
+            let mean: f64 = moments.mean.iter().sum();
+            Some((stats, mean, moments))
         })
         .collect();
-    if stats.is_empty() {
+    if lights.is_empty() {
         return None;
     }
-    let k = stats.len() as f64;
-    Some((
-        stats.len(),
-        WalkStats {
-            relative_variance: stats.iter().map(|s| s.relative_variance).sum::<f64>() / k,
-            zero_fraction: stats.iter().map(|s| s.zero_fraction).sum::<f64>() / k,
-            top_share: stats.iter().map(|s| s.top_share).sum::<f64>() / k,
+    let k = lights.len() as f64;
+    let average = |f: fn(&WalkStats) -> f64| lights.iter().map(|(s, _, _)| f(s)).sum::<f64>() / k;
+    let variance: f64 = lights
+        .iter()
+        .map(|(s, m, _)| s.relative_variance * m * m)
+        .sum();
+    let mean_sq: f64 = lights.iter().map(|(_, m, _)| m * m).sum();
+    let mean_sum: f64 = lights.iter().map(|(_, m, _)| m).sum();
+    let mut mean_share = [0.0; 8];
+    let mut variance_share = [0.0; 8];
+    for (_, _, b) in &lights {
+        for i in 0..8 {
+            mean_share[i] += b.mean[i] / mean_sum;
+            variance_share[i] += b.covariance[i] / variance;
+        }
+    }
+    Some(WalkReport {
+        lights: lights.len(),
+        per_light: WalkStats {
+            relative_variance: average(|s| s.relative_variance),
+            zero_fraction: average(|s| s.zero_fraction),
+            top_share: average(|s| s.top_share),
         },
-    ))
+        pooled_relative_variance: variance / mean_sq,
+        mean_share,
+        variance_share,
+    })
 }
 
 /// What `lantern noise` measured.
@@ -280,7 +378,7 @@ pub struct NoiseReport {
     /// Light-set noise (fresh sets, the same pixel streams).
     pub sets: PartNoise,
     /// Walk statistics: lights measured and their average.
-    pub walks: Option<(usize, WalkStats)>,
+    pub walks: Option<WalkReport>,
 }
 
 /// Measures the noise of `settings`' internal lights on `prepared`.
@@ -407,15 +505,32 @@ pub fn format_report(
         per_sec(r.sets.total_sd, r.set_secs)
     );
     match &r.walks {
-        Some((n, w)) => {
+        Some(w) => {
+            let p = &w.per_light;
             let _ = writeln!(
                 s,
-                "\nwalks towards the camera from {n} lights: relative variance per walk {:.1} (sd {:.2}); {:.1} % of the walks carried nothing through a collision; the top 1 % carried {:.1} % of the mean",
-                w.relative_variance,
-                w.relative_variance.sqrt(),
-                100.0 * w.zero_fraction,
-                100.0 * w.top_share
+                "\nwalks towards the camera from {} lights within its reach (the renderer's walks, collision tails included): relative variance per walk {:.1} (sd {:.2}) averaged over the lights, {:.1} pooled (Σ Var / Σ mean², as the image weighs them); {:.1} % of the walks carried nothing through a collision; the top 1 % carried {:.1} % of the mean",
+                w.lights,
+                p.relative_variance,
+                p.relative_variance.sqrt(),
+                w.pooled_relative_variance,
+                100.0 * p.zero_fraction,
+                100.0 * p.top_share
             );
+            let _ = writeln!(
+                s,
+                "\n| readings after this many collisions | 1 | 2 | 3–5 | 6–9 | 10–19 | 20–49 | 50–99 | ≥ 100 |\n|---|---|---|---|---|---|---|---|---|"
+            );
+            for (label, shares) in [
+                ("share of the mean", &w.mean_share),
+                ("share of the variance", &w.variance_share),
+            ] {
+                let cells: Vec<String> = shares
+                    .iter()
+                    .map(|v| format!("{:.1} %", 100.0 * v))
+                    .collect();
+                let _ = writeln!(s, "| {label} | {} |", cells.join(" | "));
+            }
         }
         None => {
             let _ = writeln!(s, "\nwalks: not measured");
@@ -466,6 +581,47 @@ mod tests {
         );
         assert!(walk_stats(&[0.0, 0.0]).is_none());
         assert!(walk_stats(&[]).is_none());
+    }
+
+    #[test]
+    fn collision_bands_split_the_counts() {
+        let bands: Vec<usize> = [1, 2, 3, 5, 6, 9, 10, 19, 20, 49, 50, 99, 100, 5000]
+            .iter()
+            .map(|&c| collision_band(c))
+            .collect();
+        assert_eq!(bands, [0, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7]);
+        // A reading before any collision is not a collided one; it would
+        // fall in the first band rather than nowhere.
+        assert_eq!(collision_band(0), 0);
+    }
+
+    /// The bands' means add up to the walks' mean and their covariances
+    /// with the whole value to its variance; a band that never reads has
+    /// neither.
+    #[test]
+    fn band_moments_split_the_mean_and_the_variance() {
+        let mut rng = Rng::from_state(11);
+        let split: Vec<[f64; 8]> = (0..500)
+            .map(|_| {
+                let mut b = [0.0; 8];
+                b[0] = f64::from(rng.next_f32());
+                // Band 4 is correlated with band 0, band 5 independent of it.
+                b[4] = 2.0 * b[0] + f64::from(rng.next_f32());
+                b[5] = if rng.next_f32() < 0.1 { 10.0 } else { 0.0 };
+                b
+            })
+            .collect();
+        let m = band_moments(&split);
+        let totals: Vec<f64> = split.iter().map(|b| b.iter().sum()).collect();
+        let n = totals.len() as f64;
+        let mean = totals.iter().sum::<f64>() / n;
+        let var = totals.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / n;
+        assert!((m.mean.iter().sum::<f64>() - mean).abs() < 1e-9 * mean);
+        assert!((m.covariance.iter().sum::<f64>() - var).abs() < 1e-9 * var);
+        assert_eq!((m.mean[7], m.covariance[7]), (0.0, 0.0));
+        // The rare band-5 readings carry most of the variance: 0.1·0.9·100
+        // = 9 of about 9.6.
+        assert!(m.covariance[5] / var > 0.85, "{:?}", m.covariance);
     }
 
     /// One pass has no variance: a clear error, not a division by zero.
@@ -538,12 +694,21 @@ mod tests {
             many.sets,
             one.sets
         );
-        let (n, w) = one.walks.unwrap();
+        let w = one.walks.unwrap();
+        let p = w.per_light;
         assert!(
-            n > 0 && w.relative_variance > 0.0 && w.top_share <= 1.0,
+            w.lights > 0
+                && p.relative_variance > 0.0
+                && p.top_share <= 1.0
+                && w.pooled_relative_variance > 0.0,
             "{w:?}"
         );
+        // Every reading falls in some band: the shares add up to one.
+        for shares in [w.mean_share, w.variance_share] {
+            assert!((shares.iter().sum::<f64>() - 1.0).abs() < 1e-6, "{w:?}");
+        }
         let text = format_report("thin_sphere", (24, 24), &settings, 0.0, &one);
         assert!(text.contains("| light sets"), "{text}");
+        assert!(text.contains("| share of the variance |"), "{text}");
     }
 }

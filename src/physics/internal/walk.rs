@@ -158,10 +158,10 @@ impl<'a, D: DensityField> Walks<'a, D> {
         // Terms past the last slot add to it (`term_slot`'s folding, for
         // any length of `out`).
         let last_slot = slots - 1;
-        self.gate_sources(z, n, first, false, false, rng, |k, v, scattered| {
+        self.gate_sources(z, n, first, false, false, rng, |k, v, collisions| {
             let slot = (k as usize).min(last_slot);
             out[slot] += v;
-            if let (false, Some(u)) = (scattered, unscattered.as_deref_mut()) {
+            if let (0, Some(u)) = (collisions, unscattered.as_deref_mut()) {
                 u[slot] += v;
             }
         });
@@ -181,8 +181,24 @@ impl<'a, D: DensityField> Walks<'a, D> {
     /// the same sum in expectation, without the clock's quadrature.
     pub fn accumulate_collided(&self, z: Vec3, n: Vec3, rng: &mut Rng) -> Vec3 {
         let mut sum = Vec3::ZERO;
-        self.gate_sources(z, n, 1, true, true, rng, |_, v, _| sum += v);
+        self.collided_readings(z, n, rng, |_, v| sum += v);
         sum
+    }
+
+    /// The walk of [`Walks::accumulate_collided`], calling
+    /// `reading(collisions, v)` with each of its readings and the number of
+    /// real collisions the walk made before it (at least one): where a
+    /// walk's value comes from, for `lantern noise`.
+    pub fn collided_readings(
+        &self,
+        z: Vec3,
+        n: Vec3,
+        rng: &mut Rng,
+        mut reading: impl FnMut(u32, Vec3),
+    ) {
+        self.gate_sources(z, n, 1, true, true, rng, |_, v, collisions| {
+            reading(collisions, v)
+        });
     }
 
     /// One walk's `Σ_{k≥1} Ĵ_k(z, n)`, the sum of what
@@ -214,9 +230,9 @@ impl<'a, D: DensityField> Walks<'a, D> {
     }
 
     /// The walk behind [`Walks::accumulate_j_from`] and
-    /// [`Walks::accumulate_collided`]: calls `add(k, v, scattered)` with
+    /// [`Walks::accumulate_collided`]: calls `add(k, v, collisions)` with
     /// each gate's `v = w · α σ_t · ρ · (S₁/b)(z_k, n_k)` for `k ≥ first`
-    /// (`scattered`: the walk collided before the gate); with
+    /// (`collisions`: the walk's real collisions before the gate); with
     /// `collided_only`, gates before the first collision are skipped
     /// without their shadow rays. With `tail` (a caller that sums the
     /// terms) the walk hands over to [`Walks::collision_tail`] on the
@@ -230,7 +246,7 @@ impl<'a, D: DensityField> Walks<'a, D> {
         collided_only: bool,
         tail: bool,
         rng: &mut Rng,
-        mut add: impl FnMut(u32, Vec3, bool),
+        mut add: impl FnMut(u32, Vec3, u32),
     ) {
         let (vol, lights, clock) = (self.vol, self.lights, self.gates.clock);
         let scatter = vol.optics.albedo * vol.optics.sigma_t;
@@ -249,8 +265,8 @@ impl<'a, D: DensityField> Walks<'a, D> {
             n,
             rng,
             tail,
-            |k, w, zk, nk, scattered, rng| {
-                if k < first || w == Vec3::ZERO || (collided_only && !scattered) {
+            |k, w, zk, nk, collisions, rng| {
+                if k < first || w == Vec3::ZERO || (collided_only && collisions == 0) {
                     return;
                 }
                 let rho = match clock {
@@ -261,7 +277,7 @@ impl<'a, D: DensityField> Walks<'a, D> {
                     return;
                 }
                 let source = gate_scatter_source(vol, lights, zk, nk, rng);
-                add(k, w * scatter * rho * source, scattered);
+                add(k, w * scatter * rho * source, collisions);
             },
             None,
         );
@@ -594,7 +610,7 @@ impl<D: DensityField> Walks<'_, D> {
         at: TailState,
         guide: Option<&Lights>,
         rng: &mut Rng,
-        on_gate: &mut impl FnMut(u32, Vec3, Vec3, Vec3, bool, &mut Rng),
+        on_gate: &mut impl FnMut(u32, Vec3, Vec3, Vec3, u32, &mut Rng),
     ) -> Option<TailState> {
         let (vol, settings) = (self.vol, &self.gates);
         let s_star = settings.s_star.max(1e-12);
@@ -625,12 +641,14 @@ impl<D: DensityField> Walks<'_, D> {
             if near {
                 return Some(self.replay_tail(at, steps, guide, Rng::from_state(path_start)));
             }
+            // Both flights of a step leave from the collision the walk is at.
+            let collisions = state.collisions;
             let step = self.tail_step(&mut state, guide, &mut path, rng);
             if let Some((w, p, d)) = step.second {
-                on_gate(k, w * per_gate, p, -d, true, rng);
+                on_gate(k, w * per_gate, p, -d, collisions, rng);
             }
             if let Some((w, p, d)) = step.own {
-                on_gate(k, w * per_gate, p, -d, true, rng);
+                on_gate(k, w * per_gate, p, -d, collisions, rng);
             }
             bound += step.depth;
             if step.ended {
@@ -779,8 +797,8 @@ impl<D: DensityField> Walks<'_, D> {
     /// first collision, with the gates on the way weighted by its factor
     /// (the walk's weight carries it), and then the walk resumes its own
     /// flight from the collision, whose gates take the other factor.
-    /// `on_gate(k, weight, z_k, n_k, scattered, rng)` also learns whether the
-    /// walk has collided yet and receives the random stream, so that the
+    /// `on_gate(k, weight, z_k, n_k, collisions, rng)` also learns how many
+    /// real collisions the walk has made and receives the random stream, so that the
     /// caller can trace shadow rays; `on_collision(clock)`, if given, is
     /// called at every real collision with the clock's value there (a hook
     /// for tests: it makes the optical-depth clock resolve at every
@@ -791,7 +809,7 @@ impl<D: DensityField> Walks<'_, D> {
         n: Vec3,
         rng: &mut Rng,
         tail: bool,
-        mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, bool, &mut Rng),
+        mut on_gate: impl FnMut(u32, Vec3, Vec3, Vec3, u32, &mut Rng),
         mut on_collision: Option<&mut dyn FnMut(f32)>,
     ) {
         let (vol, settings) = (self.vol, &self.gates);
@@ -800,7 +818,7 @@ impl<D: DensityField> Walks<'_, D> {
         let s_star = settings.s_star.max(0.0);
         let last = settings.n_terms;
         let mut weight = Vec3::ONE;
-        on_gate(0, weight, z, n, false, rng);
+        on_gate(0, weight, z, n, 0, rng);
         if last == 0 {
             return;
         }
@@ -844,7 +862,7 @@ impl<D: DensityField> Walks<'_, D> {
                     weight * factor,
                     origin + dir * t,
                     -dir,
-                    collisions > 0,
+                    collisions,
                     rng,
                 );
                 if next == last {
@@ -1005,7 +1023,7 @@ impl<D: DensityField> Walks<'_, D> {
                     origin += dir * t;
                     // A second flight's weight carries its factor.
                     let factor = if resume.is_some() { 1.0 } else { own_factor };
-                    on_gate(next, weight * factor, origin, -dir, collisions > 0, rng);
+                    on_gate(next, weight * factor, origin, -dir, collisions, rng);
                     if next == last {
                         let Some(own) = resume.take() else {
                             return;
@@ -1403,7 +1421,7 @@ mod tests {
                         Vec3::Z,
                         &mut rng,
                         false,
-                        |k, _, p, _, scattered, _| out.push((k, p, scattered)),
+                        |k, _, p, _, collisions, _| out.push((k, p, collisions > 0)),
                         resolve_each.then_some(&mut hook as &mut dyn FnMut(f32)),
                     );
                     out
