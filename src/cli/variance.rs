@@ -213,7 +213,10 @@ fn part_noise(
 /// collisions the walk made before them: band `b` holds the readings
 /// after `COLLISION_BANDS[b]` collisions up to the next band's first
 /// (1, 2, 3–5, 6–9, 10–19, 20–49, 50–99, 100 and more).
-pub const COLLISION_BANDS: [u32; 8] = [1, 2, 3, 6, 10, 20, 50, 100];
+pub const COLLISION_BANDS: [u32; BANDS] = [1, 2, 3, 6, 10, 20, 50, 100];
+
+/// How many bands [`COLLISION_BANDS`] holds.
+pub const BANDS: usize = 8;
 
 /// The band of [`COLLISION_BANDS`] a reading after `collisions` real
 /// collisions falls in.
@@ -228,20 +231,20 @@ pub fn collision_band(collisions: u32) -> usize {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BandMoments {
     /// The mean over the walks of each band's part of a walk's value.
-    pub mean: [f64; 8],
+    pub mean: [f64; BANDS],
     /// Each band's covariance with the walk's whole value: they add up to
     /// the value's variance, each band's share of it.
-    pub covariance: [f64; 8],
+    pub covariance: [f64; BANDS],
 }
 
 /// [`BandMoments`] of walks whose values are split as `split` (one row of
 /// bands per walk).
-pub fn band_moments(split: &[[f64; 8]]) -> BandMoments {
+pub fn band_moments(split: &[[f64; BANDS]]) -> BandMoments {
     let n = split.len().max(1) as f64;
     let totals: Vec<f64> = split.iter().map(|b| b.iter().sum()).collect();
     let total_mean = totals.iter().sum::<f64>() / n;
     let mut m = BandMoments::default();
-    for b in 0..8 {
+    for b in 0..BANDS {
         m.mean[b] = split.iter().map(|w| w[b]).sum::<f64>() / n;
         m.covariance[b] = split
             .iter()
@@ -267,10 +270,10 @@ pub struct WalkReport {
     pub pooled_relative_variance: f64,
     /// The share of the lights' summed means in each band of
     /// [`COLLISION_BANDS`].
-    pub mean_share: [f64; 8],
+    pub mean_share: [f64; BANDS],
     /// The share of the lights' summed variances in each band (a band's
     /// covariance with the whole value; a share can be negative).
-    pub variance_share: [f64; 8],
+    pub variance_share: [f64; BANDS],
 }
 
 /// Statistics of the walks towards `eye` that the renderer runs
@@ -318,9 +321,9 @@ pub fn light_walk_stats(
                 return None;
             }
             let mut rng = Rng::for_sample(cache.params.seed ^ 0x5eed, i as u32, 0);
-            let split: Vec<[f64; 8]> = (0..walks)
+            let split: Vec<[f64; BANDS]> = (0..walks)
                 .map(|_| {
-                    let mut bands = [0.0f64; 8];
+                    let mut bands = [0.0f64; BANDS];
                     walker.collided_readings(light.position, n, &mut rng, |c, v| {
                         bands[collision_band(c)] += grey(v);
                     });
@@ -345,10 +348,10 @@ pub fn light_walk_stats(
         .sum();
     let mean_sq: f64 = lights.iter().map(|(_, m, _)| m * m).sum();
     let mean_sum: f64 = lights.iter().map(|(_, m, _)| m).sum();
-    let mut mean_share = [0.0; 8];
-    let mut variance_share = [0.0; 8];
+    let mut mean_share = [0.0; BANDS];
+    let mut variance_share = [0.0; BANDS];
     for (_, _, b) in &lights {
-        for i in 0..8 {
+        for i in 0..BANDS {
             mean_share[i] += b.mean[i] / mean_sum;
             variance_share[i] += b.covariance[i] / variance;
         }
@@ -601,9 +604,9 @@ mod tests {
     #[test]
     fn band_moments_split_the_mean_and_the_variance() {
         let mut rng = Rng::from_state(11);
-        let split: Vec<[f64; 8]> = (0..500)
+        let split: Vec<[f64; BANDS]> = (0..500)
             .map(|_| {
-                let mut b = [0.0; 8];
+                let mut b = [0.0; BANDS];
                 b[0] = f64::from(rng.next_f32());
                 // Band 4 is correlated with band 0, band 5 independent of it.
                 b[4] = 2.0 * b[0] + f64::from(rng.next_f32());
