@@ -512,7 +512,7 @@ pub fn format_report(
             let p = &w.per_light;
             let _ = writeln!(
                 s,
-                "\nwalks towards the camera from {} lights within its reach (the renderer's walks, collision tails included): relative variance per walk {:.1} (sd {:.2}) averaged over the lights, {:.1} pooled (Σ Var / Σ mean², as the image weighs them); {:.1} % of the walks carried nothing through a collision; the top 1 % carried {:.1} % of the mean",
+                "\nwalks towards the camera from {} lights within its reach (as the renderer walks them, collision tails where it takes them): relative variance per walk {:.1} (sd {:.2}) averaged over the lights, {:.1} pooled (Σ Var / Σ mean², as the image weighs them); {:.1} % of the walks carried nothing through a collision; the top 1 % carried {:.1} % of the mean",
                 w.lights,
                 p.relative_variance,
                 p.relative_variance.sqrt(),
