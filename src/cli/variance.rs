@@ -312,7 +312,7 @@ pub fn light_walk_stats(
         .map(|j| reached[j * reached.len() / count])
         .collect();
     let grey = |v: Vec3| f64::from(v.x + v.y + v.z) / 3.0;
-    let lights: Vec<(WalkStats, f64, BandMoments)> = chosen
+    let lights: Vec<(WalkStats, BandMoments)> = chosen
         .into_par_iter()
         .filter_map(|i| {
             let light = &cache.lights[i];
@@ -331,31 +331,29 @@ pub fn light_walk_stats(
                 })
                 .collect();
             let values: Vec<f64> = split.iter().map(|b| b.iter().sum()).collect();
-            let stats = walk_stats(&values)?;
-            let moments = band_moments(&split);
-            let mean: f64 = moments.mean.iter().sum();
-            Some((stats, mean, moments))
+            Some((walk_stats(&values)?, band_moments(&split)))
         })
         .collect();
     if lights.is_empty() {
         return None;
     }
     let k = lights.len() as f64;
-    let average = |f: fn(&WalkStats) -> f64| lights.iter().map(|(s, _, _)| f(s)).sum::<f64>() / k;
-    let variance: f64 = lights
-        .iter()
-        .map(|(s, m, _)| s.relative_variance * m * m)
-        .sum();
-    let mean_sq: f64 = lights.iter().map(|(_, m, _)| m * m).sum();
-    let mean_sum: f64 = lights.iter().map(|(_, m, _)| m).sum();
-    let mut mean_share = [0.0; BANDS];
-    let mut variance_share = [0.0; BANDS];
-    for (_, _, b) in &lights {
+    let average = |f: fn(&WalkStats) -> f64| lights.iter().map(|(s, _)| f(s)).sum::<f64>() / k;
+    // The lights' band moments summed: the bands' means add up to each
+    // light's mean and their covariances to its variance.
+    let mut summed = BandMoments::default();
+    for (_, b) in &lights {
         for i in 0..BANDS {
-            mean_share[i] += b.mean[i] / mean_sum;
-            variance_share[i] += b.covariance[i] / variance;
+            summed.mean[i] += b.mean[i];
+            summed.covariance[i] += b.covariance[i];
         }
     }
+    let (mean_sum, variance): (f64, f64) =
+        (summed.mean.iter().sum(), summed.covariance.iter().sum());
+    let mean_sq: f64 = lights
+        .iter()
+        .map(|(_, b)| b.mean.iter().sum::<f64>().powi(2))
+        .sum();
     Some(WalkReport {
         lights: lights.len(),
         per_light: WalkStats {
@@ -364,8 +362,8 @@ pub fn light_walk_stats(
             top_share: average(|s| s.top_share),
         },
         pooled_relative_variance: variance / mean_sq,
-        mean_share,
-        variance_share,
+        mean_share: summed.mean.map(|m| m / mean_sum),
+        variance_share: summed.covariance.map(|c| c / variance),
     })
 }
 

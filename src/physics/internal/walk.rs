@@ -798,8 +798,8 @@ impl<D: DensityField> Walks<'_, D> {
     /// (the walk's weight carries it), and then the walk resumes its own
     /// flight from the collision, whose gates take the other factor.
     /// `on_gate(k, weight, z_k, n_k, collisions, rng)` also learns how many
-    /// real collisions the walk has made and receives the random stream, so that the
-    /// caller can trace shadow rays; `on_collision(clock)`, if given, is
+    /// real collisions the walk has made and receives the random stream,
+    /// so that the caller can trace shadow rays; `on_collision(clock)`, if given, is
     /// called at every real collision with the clock's value there (a hook
     /// for tests: it makes the optical-depth clock resolve at every
     /// collision).
