@@ -89,7 +89,7 @@ use super::walk::Walks;
 use crate::physics::lights::Lights;
 use crate::physics::phase;
 use crate::physics::reference::RR_START_DEPTH;
-use crate::physics::rng::Rng;
+use crate::physics::rng::{pcg_hash, Rng};
 use crate::physics::sh::{hg_convolve_basis, sh_basis, sh_count, MAX_COUNT, MAX_ORDER};
 use crate::physics::tracking::{transmittance, transmittance_at_rate};
 use crate::physics::volume::{DensityField, Volume};
@@ -490,6 +490,14 @@ pub struct InternalLights {
     pub(crate) phase_view: Vec<Vec3>,
     /// `phase_view` aligned with `fine.ids()`.
     pub(super) fine_phase_view: Vec<Vec3>,
+    /// The standard error of each light's `view` value, from the spread
+    /// of its walks towards the eye (per channel; zero for a light that
+    /// walked none, or fewer than two, and empty where the walks ran on
+    /// the GPU): [`InternalLights::walk_error_lights`].
+    pub(crate) view_se: Vec<Vec3>,
+    /// The standard error of each light's `phase_view` value, as
+    /// `view_se`.
+    pub(crate) phase_se: Vec<Vec3>,
     pub(super) fine_multi: Vec<Vec3>,
     pub(super) fine_scattered: Vec<Vec3>,
     /// Light clusters for the gather's light selection.
@@ -938,6 +946,8 @@ impl InternalLights {
                     to_eye,
                     view: Vec3::ZERO,
                     phase: Vec3::ZERO,
+                    view_sq: Vec3::ZERO,
+                    phase_sq: Vec3::ZERO,
                     f: vec![Vec3::ZERO; count],
                     multi: vec![Vec3::ZERO; count],
                     scattered: vec![Vec3::ZERO; count],
@@ -995,10 +1005,14 @@ impl InternalLights {
                         );
                     }
                     if let Some(n) = state.to_eye.filter(|_| towards_eye) {
-                        state.view += walker.accumulate_collided(x, n, &mut state.eye_rng);
+                        let v = walker.accumulate_collided(x, n, &mut state.eye_rng);
+                        state.view += v;
+                        state.view_sq += v * v;
                     }
                     if let Some(n) = state.to_eye.filter(|_| phase_turned) {
-                        state.phase += phase_walk(&walker, x, n, &mut state.eye_rng);
+                        let v = phase_walk(&walker, x, n, &mut state.eye_rng);
+                        state.phase += v;
+                        state.phase_sq += v * v;
                     }
                 },
             );
@@ -1027,12 +1041,16 @@ impl InternalLights {
                 sums.chain(state.energy.iter_mut().skip(1))
                     .for_each(|v| *v *= w_dir);
                 if phase_done > 0 {
+                    state.phase_sq = standard_error(state.phase, state.phase_sq, phase_done);
                     state.phase /= phase_done as f32;
                 }
                 if let Some(n) = state.to_eye.filter(|_| state.view != Vec3::ZERO) {
                     let x = light.position;
-                    state.view /=
-                        view_done as f32 * collision_probability(vol, params.s_star, x, -n);
+                    let chance = collision_probability(vol, params.s_star, x, -n);
+                    state.view_sq = standard_error(state.view, state.view_sq, view_done) / chance;
+                    state.view /= view_done as f32 * chance;
+                } else {
+                    state.view_sq = Vec3::ZERO;
                 }
             });
         if cancel.load(Ordering::Relaxed) {
@@ -1040,6 +1058,16 @@ impl InternalLights {
         }
         let mut sources = LightSources::with_capacity(lights, count, n_ext, slots);
         sources.kernel_radius = Some(kernel_radius);
+        let view_se: Vec<Vec3> = if params.view_walks > 0 {
+            walked.iter().map(|w| w.view_sq).collect()
+        } else {
+            Vec::new()
+        };
+        let phase_se: Vec<Vec3> = if phase_count > 0 {
+            walked.iter().map(|w| w.phase_sq).collect()
+        } else {
+            Vec::new()
+        };
         for w in walked {
             if params.view_walks > 0 {
                 sources.view.push(w.view);
@@ -1056,6 +1084,8 @@ impl InternalLights {
         out.timings.walks = t_walk;
         out.walked = lattice_done;
         out.walk_share = f64::from(rounds.min(total_rounds)) / f64::from(total_rounds.max(1));
+        out.view_se = view_se;
+        out.phase_se = phase_se;
         Some(out)
     }
 
@@ -1189,6 +1219,8 @@ impl InternalLights {
             fine_view,
             phase_view,
             fine_phase_view,
+            view_se: Vec::new(),
+            phase_se: Vec::new(),
             fine_multi,
             fine_scattered,
             clusters: LightGrid::build(&[], |_| false, vol.bounds, 1.0, 1),
@@ -1354,6 +1386,54 @@ impl InternalLights {
         self.f_coeffs[i * self.sh_count] * Y00
     }
 
+    /// A copy of the set whose walks towards the eye and phase walks
+    /// (the per-light values `L₀` and `L₁` read, method §5.4) are replaced
+    /// by `sign` times each light's standard error, itself turned by a
+    /// random sign per light (from `draw`); everything else (positions,
+    /// harmonics, arrivals) is the set's. The gather is linear in those
+    /// values (the reconstruction is not clamped), so a pass with
+    /// `sign` 1 minus the same pass (the same pixel streams) with `sign`
+    /// −1, halved, is the image of random errors of the lights' values
+    /// with their walks' variances: its mean square is the walks' share
+    /// of the set's noise, measured from the set alone (`lantern noise`;
+    /// validation §3.29). `None` where the set holds no standard errors
+    /// (no view walks, or walked on the GPU).
+    pub fn walk_error_lights(&self, draw: u32, sign: f32) -> Option<InternalLights> {
+        if self.view_se.is_empty() || self.view_se.len() != self.view.len() {
+            return None;
+        }
+        // Independent signs for the two kinds of walks, which are
+        // independent of each other.
+        let turned = |se: &[Vec3], kind: u32| -> Vec<Vec3> {
+            let draw = pcg_hash(draw.wrapping_mul(2).wrapping_add(kind));
+            se.iter()
+                .enumerate()
+                .map(|(i, &e)| {
+                    let h = pcg_hash(draw ^ pcg_hash(i as u32));
+                    e * if h & 1 == 0 { sign } else { -sign }
+                })
+                .collect()
+        };
+        let mut out = self.clone();
+        out.view = turned(&self.view_se, 0);
+        out.fine_view = self
+            .fine
+            .ids()
+            .iter()
+            .map(|&i| out.view[i as usize])
+            .collect();
+        if !self.phase_view.is_empty() && self.phase_se.len() == self.phase_view.len() {
+            out.phase_view = turned(&self.phase_se, 1);
+            out.fine_phase_view = self
+                .fine
+                .ids()
+                .iter()
+                .map(|&i| out.phase_view[i as usize])
+                .collect();
+        }
+        Some(out)
+    }
+
     /// The mean of `J_i` over directions, `∫J_i dn / 4π`.
     pub fn mean_j(&self, i: usize) -> Vec3 {
         let n_ext = self.arrival.len() / self.lights.len().max(1);
@@ -1393,6 +1473,11 @@ struct Walked {
     view: Vec3,
     /// The phase walks ([`phase_walks`]): all of `Σ_{k≥1} J_k`, summed.
     phase: Vec3,
+    /// The squares of the walks towards the eye and of the phase walks,
+    /// summed; once the walks are done, the standard errors of `view` and
+    /// `phase`.
+    view_sq: Vec3,
+    phase_sq: Vec3,
     /// `F`, `Σ J_k` and its collided part by direction (spherical
     /// harmonics) and the terms' energies `k ≥ 1`: sums over the walks,
     /// unweighted until the walks are done. `energy[0]` is the `k = 0`
@@ -1402,6 +1487,18 @@ struct Walked {
     scattered: Vec<Vec3>,
     arrival: Vec<Vec3>,
     energy: Vec<Vec3>,
+}
+
+/// The standard error of the mean of `n` values from their sum and the
+/// sum of their squares (per channel; zero for fewer than two values).
+fn standard_error(sum: Vec3, sum_sq: Vec3, n: u32) -> Vec3 {
+    if n < 2 {
+        return Vec3::ZERO;
+    }
+    let n = n as f32;
+    let mean = sum / n;
+    let variance = ((sum_sq / n - mean * mean) * (n / (n - 1.0))).max(Vec3::ZERO);
+    (variance / n).powf(0.5)
 }
 
 /// Point `w` of a spherical Fibonacci lattice of `walks` directions under
@@ -1521,6 +1618,111 @@ mod tests {
             ..sh1_params(Clock::OpticalDepth, 0.5, 24, 0.3, L1Form::Field)
         };
         (vol, sun, eye, params)
+    }
+
+    /// Each light's standard error of its walks towards the eye and of its
+    /// phase walks is the spread its value has over independent walks:
+    /// 48 builds of the same 512 lights of a sunlit cube (`g` 0.85, so
+    /// phase walks run too), each with walk streams of its own; over the
+    /// lights, the mean squared standard error against the mean variance
+    /// of the values across the builds, within 7 % (each light's
+    /// across-build variance is known to a fifth, their mean over the
+    /// lights to a few percent; a standard error of the walks' spread
+    /// rather than of their mean, or without the chance of a collision,
+    /// misses by a factor; without the `n/(n − 1)` of 12 walks, by 9 %). And
+    /// `walk_error_lights` puts exactly `±` those errors in the values'
+    /// place, the two signs opposite, the signs of a draw split about
+    /// evenly and independent between the two kinds of walks.
+    #[test]
+    fn walk_errors_are_the_spread_of_the_lights_values() {
+        use std::sync::atomic::AtomicBool;
+        let (vol, sun, _eye, base) = sunlit_cube_seen(0.85, 4);
+        let params = InternalParams {
+            lights: 512,
+            view_walks: 12,
+            ..base
+        };
+        let density = placement_density(&vol, params.uniform_mix);
+        let (lights, integral) = place_internal_lights(&vol, &params, &density);
+        let never = AtomicBool::new(false);
+        let builds: Vec<InternalLights> = (0..48u64)
+            .map(|b| {
+                let params = InternalParams {
+                    seed: 1000 + b,
+                    ..params
+                };
+                InternalLights::build_at(&vol, &sun, &params, lights.clone(), integral, &never)
+                    .expect("not cancelled")
+            })
+            .collect();
+        let n = builds.len() as f64;
+        for kind in ["view", "phase"] {
+            let values = |l: &InternalLights| match kind {
+                "view" => (l.view.clone(), l.view_se.clone()),
+                _ => (l.phase_view.clone(), l.phase_se.clone()),
+            };
+            let (first, first_se) = values(&builds[0]);
+            assert_eq!(first_se.len(), first.len(), "{kind}: one error per light");
+            let (mut spread, mut se2, mut walked) = (0.0f64, 0.0f64, 0usize);
+            for i in 0..first.len() {
+                let v: Vec<f64> = builds
+                    .iter()
+                    .map(|l| f64::from(values(l).0[i].element_sum()))
+                    .collect();
+                let e: Vec<f64> = builds
+                    .iter()
+                    .map(|l| f64::from(values(l).1[i].element_sum()))
+                    .collect();
+                if e.iter().all(|&e| e == 0.0) {
+                    continue; // out of the camera's reach: no walks
+                }
+                walked += 1;
+                let mean = v.iter().sum::<f64>() / n;
+                spread += v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+                se2 += e.iter().map(|e| e * e).sum::<f64>() / n;
+            }
+            eprintln!("{kind}: {walked} lights, spread {spread:.5}, errors² {se2:.5}");
+            assert!(walked > 128, "{kind}: only {walked} lights walked");
+            let ratio = se2 / spread;
+            assert!(
+                (0.93..1.07).contains(&ratio),
+                "{kind}: errors² / spread {ratio:.3} ({se2} against {spread})"
+            );
+        }
+        let set = &builds[0];
+        let plus = set.walk_error_lights(3, 1.0).expect("errors kept");
+        let minus = set.walk_error_lights(3, -1.0).expect("errors kept");
+        let mut positive = 0usize;
+        for i in 0..set.view.len() {
+            assert_eq!(plus.view[i], -minus.view[i]);
+            assert_eq!(plus.view[i].abs(), set.view_se[i]);
+            assert_eq!(plus.phase_view[i].abs(), set.phase_se[i]);
+            let up = |v: Vec3| v.element_sum() > 0.0;
+            positive += usize::from(up(plus.view[i]));
+        }
+        let walked = set.view_se.iter().filter(|e| e.element_sum() > 0.0).count();
+        assert!(
+            positive.abs_diff(walked / 2) < walked / 5,
+            "{positive} of {walked} positive"
+        );
+        let both = (0..set.view.len())
+            .filter(|&i| set.view_se[i].element_sum() > 0.0 && set.phase_se[i].element_sum() > 0.0)
+            .count();
+        let same = (0..set.view.len())
+            .filter(|&i| set.view_se[i].element_sum() > 0.0 && set.phase_se[i].element_sum() > 0.0)
+            .filter(|&i| {
+                (plus.view[i].element_sum() > 0.0) == (plus.phase_view[i].element_sum() > 0.0)
+            })
+            .count();
+        assert!(
+            same.abs_diff(both / 2) < both / 5,
+            "{same} of {both} lights with the same sign for both kinds"
+        );
+        // The fine grid's copies follow the values.
+        for (slot, &i) in plus.fine.ids().iter().enumerate() {
+            assert_eq!(plus.fine_view[slot], plus.view[i as usize]);
+            assert_eq!(plus.fine_phase_view[slot], plus.phase_view[i as usize]);
+        }
     }
 
     /// The walks towards the eye estimate what the lights' harmonics hold
