@@ -727,15 +727,9 @@ mod tests {
     }
 
     fn thin_sphere(walks: u32, light_samples: u32) -> (NoiseReport, RenderSettings) {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let args = NoiseArgs {
-            scene: root.join("assets/scenes/thin_sphere.ron"),
-            size: 24,
-            passes: 12,
-            walk_lights: 8,
-            walk_count: 200,
-            kernel_neighbours: KERNEL_NEIGHBOURS,
-            internal: InternalArgs {
+        thin_sphere_with(
+            8,
+            InternalArgs {
                 lights: Some(1024),
                 walks: Some(walks),
                 light_samples: Some(light_samples),
@@ -748,6 +742,21 @@ mod tests {
                 view_walks: Some(0),
                 ..Default::default()
             },
+        )
+    }
+
+    /// `lantern noise` on the thin sphere at 24², 12 passes, with
+    /// `internal` and walk statistics at `walk_lights` lights.
+    fn thin_sphere_with(walk_lights: u32, internal: InternalArgs) -> (NoiseReport, RenderSettings) {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let args = NoiseArgs {
+            scene: root.join("assets/scenes/thin_sphere.ron"),
+            size: 24,
+            passes: 12,
+            walk_lights,
+            walk_count: 200,
+            kernel_neighbours: KERNEL_NEIGHBOURS,
+            internal,
         };
         let prepared = load_square(&args.scene, args.size).unwrap();
         let mut settings = prepared.scene.render.clone();
@@ -767,26 +776,15 @@ mod tests {
     /// several times too high. The report prints it.
     #[test]
     fn the_walks_errors_measure_a_sets_noise() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let args = NoiseArgs {
-            scene: root.join("assets/scenes/thin_sphere.ron"),
-            size: 24,
-            passes: 12,
-            walk_lights: 0,
-            walk_count: 0,
-            kernel_neighbours: KERNEL_NEIGHBOURS,
-            internal: InternalArgs {
+        let (r, settings) = thin_sphere_with(
+            0,
+            InternalArgs {
                 lights: Some(1024),
                 walks: Some(4),
                 view_walks: Some(8),
                 ..Default::default()
             },
-        };
-        let prepared = load_square(&args.scene, args.size).unwrap();
-        let mut settings = prepared.scene.render.clone();
-        settings.method = Method::Internal;
-        args.internal.apply(&mut settings.internal);
-        let r = measure(&prepared, &settings, &args).unwrap();
+        );
         let (sd, total) = r.walk_errors.expect("the set has walks towards the eye");
         eprintln!("walks' errors {sd:?} {total}, fresh sets {:?}", r.sets.sd);
         assert_eq!(sd[0], 0.0, "the single scatter is exact");

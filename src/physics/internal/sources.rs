@@ -1414,22 +1414,17 @@ impl InternalLights {
                 })
                 .collect()
         };
+        // The fine grid's copies, in its slot order.
+        let by_slot = |values: &[Vec3]| -> Vec<Vec3> {
+            let ids = self.fine.ids().iter();
+            ids.map(|&i| values[i as usize]).collect()
+        };
         let mut out = self.clone();
         out.view = turned(&self.view_se, 0);
-        out.fine_view = self
-            .fine
-            .ids()
-            .iter()
-            .map(|&i| out.view[i as usize])
-            .collect();
+        out.fine_view = by_slot(&out.view);
         if !self.phase_view.is_empty() && self.phase_se.len() == self.phase_view.len() {
             out.phase_view = turned(&self.phase_se, 1);
-            out.fine_phase_view = self
-                .fine
-                .ids()
-                .iter()
-                .map(|&i| out.phase_view[i as usize])
-                .collect();
+            out.fine_phase_view = by_slot(&out.phase_view);
         }
         Some(out)
     }
