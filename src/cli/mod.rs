@@ -62,7 +62,8 @@ pub enum Command {
     Converge(converge::ConvergeArgs),
     /// Where the internal-lights image's noise comes from: per-pixel noise
     /// of each part of the gather with one light set and across light sets,
-    /// and the distribution of single walks.
+    /// the walks' share of a set's noise measured from that set alone, and
+    /// the distribution of single walks.
     Noise(variance::NoiseArgs),
     /// The internal lights against the reference at equal wall time on
     /// scenes with a converged reference (mean error per channel, 8×8-block

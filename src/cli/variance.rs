@@ -71,7 +71,8 @@ pub struct NoiseArgs {
     /// Image side in pixels (overrides the scene's camera; 0 keeps it).
     #[arg(long, default_value_t = 128)]
     pub size: u32,
-    /// Passes of each of the two image measurements (at least 2).
+    /// Passes of each of the image measurements (at least 2; the walks'
+    /// errors from one set take two per draw).
     #[arg(long, default_value_t = 8)]
     pub passes: u32,
     /// Lights within the camera's reach whose walks towards it are
