@@ -380,7 +380,6 @@ pub fn light_walk_stats(
     let chosen: Vec<usize> = (0..count)
         .map(|j| reached[j * reached.len() / count])
         .collect();
-    let grey = |v: Vec3| f64::from(v.x + v.y + v.z) / 3.0;
     let lights: Vec<(WalkStats, BandMoments)> = chosen
         .into_par_iter()
         .filter_map(|i| {
